@@ -1,0 +1,55 @@
+# slamd: the two commands that do everything on a fresh Debian 12 machine are
+#   make run    (installs dependencies, builds, runs slamd on a built-in synthetic world)
+#   make test   (installs dependencies, builds, runs every test, plus the concurrency tests
+#                under ThreadSanitizer)
+# Other targets: deps, build, bench, tsan, asan, ubsan, clean.
+
+BUILD_DIR ?= build
+JOBS ?= 2
+CMAKE_ARGS ?=
+CTEST_ARGS ?=
+
+.PHONY: all deps build test unit-test run bench tsan asan ubsan clean
+
+all: build
+
+deps:
+	@bash scripts/install-deps.sh
+
+$(BUILD_DIR)/CMakeCache.txt:
+	cmake -S . -B $(BUILD_DIR) -DCMAKE_BUILD_TYPE=Release $(CMAKE_ARGS)
+
+build: deps $(BUILD_DIR)/CMakeCache.txt
+	cmake --build $(BUILD_DIR) -j$(JOBS)
+
+unit-test: build
+	cd $(BUILD_DIR) && ctest --output-on-failure -j$(JOBS) $(CTEST_ARGS)
+
+test: unit-test tsan
+
+run: build
+	@bash scripts/run-default.sh $(BUILD_DIR)
+
+bench: build
+	@bash scripts/run-bench.sh $(BUILD_DIR)
+
+# Sanitizer builds live in their own trees. TSan covers the tests labelled "concurrency"
+# (queues, pipeline, daemon threads); ASan and UBSan cover all tests.
+tsan: deps
+	cmake -S . -B build-tsan -DSLAMD_SANITIZE=thread -DSLAMD_BUILD_BENCH=OFF $(CMAKE_ARGS)
+	cmake --build build-tsan -j$(JOBS) --target concurrency_tests
+	cd build-tsan && TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1" \
+	  ctest --output-on-failure -j$(JOBS) -L concurrency $(CTEST_ARGS)
+
+asan: deps
+	cmake -S . -B build-asan -DSLAMD_SANITIZE=address -DSLAMD_BUILD_BENCH=OFF $(CMAKE_ARGS)
+	cmake --build build-asan -j$(JOBS)
+	cd build-asan && ASAN_OPTIONS="detect_leaks=1" ctest --output-on-failure -j$(JOBS) $(CTEST_ARGS)
+
+ubsan: deps
+	cmake -S . -B build-ubsan -DSLAMD_SANITIZE=undefined -DSLAMD_BUILD_BENCH=OFF $(CMAKE_ARGS)
+	cmake --build build-ubsan -j$(JOBS)
+	cd build-ubsan && UBSAN_OPTIONS="print_stacktrace=1" ctest --output-on-failure -j$(JOBS) $(CTEST_ARGS)
+
+clean:
+	rm -rf $(BUILD_DIR) build-tsan build-asan build-ubsan

@@ -1,0 +1,46 @@
+# Compiler warnings as an interface target every slamd target links privately.
+add_library(slamd_warnings INTERFACE)
+add_library(slamd::warnings ALIAS slamd_warnings)
+target_compile_options(slamd_warnings INTERFACE
+  -Wall -Wextra -Wpedantic -Wshadow -Wnon-virtual-dtor -Wold-style-cast -Wcast-align
+  -Woverloaded-virtual -Wnull-dereference -Wdouble-promotion -Wformat=2 -Wimplicit-fallthrough)
+
+# Sanitizers apply to everything built in this tree (libraries, tests, programs) so that a
+# sanitized test never links an unsanitized slamd library.
+if(SLAMD_SANITIZE)
+  if(SLAMD_SANITIZE STREQUAL "address")
+    set(_slamd_san_flags -fsanitize=address -fno-omit-frame-pointer)
+  elseif(SLAMD_SANITIZE STREQUAL "thread")
+    set(_slamd_san_flags -fsanitize=thread)
+  elseif(SLAMD_SANITIZE STREQUAL "undefined")
+    set(_slamd_san_flags -fsanitize=undefined -fno-sanitize-recover=undefined)
+  else()
+    message(FATAL_ERROR "SLAMD_SANITIZE='${SLAMD_SANITIZE}': allowed values are address, thread, undefined")
+  endif()
+  add_compile_options(${_slamd_san_flags} -g)
+  add_link_options(${_slamd_san_flags})
+  # Debug info + light optimisation keeps sanitized runs fast enough for the suite.
+  if(CMAKE_BUILD_TYPE STREQUAL "Release")
+    set(CMAKE_BUILD_TYPE RelWithDebInfo CACHE STRING "Build type" FORCE)
+  endif()
+endif()
+
+# Eigen: catch uninitialised matrices in debug builds (basalt's practice).
+add_compile_definitions($<$<CONFIG:Debug>:EIGEN_INITIALIZE_MATRICES_BY_NAN>)
+
+# slamd_add_library(<area> SOURCES ... DEPS ...): the library slamd_<area>, alias slamd::<area>.
+function(slamd_add_library area)
+  cmake_parse_arguments(ARG "" "" "SOURCES;PUBLIC_DEPS;PRIVATE_DEPS" ${ARGN})
+  add_library(slamd_${area} STATIC ${ARG_SOURCES})
+  add_library(slamd::${area} ALIAS slamd_${area})
+  target_include_directories(slamd_${area} PUBLIC ${PROJECT_SOURCE_DIR}/include)
+  target_link_libraries(slamd_${area} PUBLIC ${ARG_PUBLIC_DEPS} PRIVATE ${ARG_PRIVATE_DEPS} slamd::warnings)
+  set_target_properties(slamd_${area} PROPERTIES POSITION_INDEPENDENT_CODE ON)
+endfunction()
+
+# slamd_add_program(<name> SOURCES ... DEPS ...): an executable in build/bin.
+function(slamd_add_program name)
+  cmake_parse_arguments(ARG "" "" "SOURCES;DEPS" ${ARGN})
+  add_executable(${name} ${ARG_SOURCES})
+  target_link_libraries(${name} PRIVATE ${ARG_DEPS} slamd::warnings)
+endfunction()

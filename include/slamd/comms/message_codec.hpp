@@ -1,0 +1,53 @@
+#pragma once
+// Encoding and checked decoding of any lcm-gen message type. Decoding never throws and never
+// crashes on malformed input: a wrong fingerprint, a truncated buffer or an impossible length
+// gives std::nullopt and a message saying why, so that receivers can count and report bad input.
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "slamd/comms/message_precheck.hpp"
+
+namespace slamd {
+
+template <typename Message>
+std::vector<std::uint8_t> encodeMessage(const Message& message) {
+  std::vector<std::uint8_t> buffer(static_cast<std::size_t>(message.getEncodedSize()));
+  const int written = message.encode(buffer.data(), 0, static_cast<int>(buffer.size()));
+  buffer.resize(written < 0 ? 0 : static_cast<std::size_t>(written));
+  return buffer;
+}
+
+template <typename Message>
+std::optional<Message> decodeMessage(const void* data, std::size_t size,
+                                     std::string* error = nullptr) {
+  Message message;
+  if (!MessagePrecheck<Message>::plausible(data, size)) {
+    if (error) {
+      *error = std::string("cannot decode ") + std::to_string(size) + " bytes as " +
+               Message::getTypeName() + " (truncated, or an array count larger than the message)";
+    }
+    return std::nullopt;
+  }
+  int status = -1;
+  try {
+    // lcm-gen's decoders check lengths against the buffer; anything they still throw (a vector
+    // resize on a corrupt count the pre-check cannot see) is caught here.
+    status = message.decode(data, 0, static_cast<int>(size));
+  } catch (const std::exception& e) {
+    if (error) *error = std::string("malformed ") + Message::getTypeName() + ": " + e.what();
+    return std::nullopt;
+  }
+  if (status < 0) {
+    if (error) {
+      *error = std::string("cannot decode ") + std::to_string(size) + " bytes as " +
+               Message::getTypeName() + " (wrong type, truncated or corrupt)";
+    }
+    return std::nullopt;
+  }
+  return message;
+}
+
+}  // namespace slamd

@@ -1,0 +1,293 @@
+#include "slamd/common/config.hpp"
+
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <sstream>
+
+#include <opencv2/core.hpp>
+
+namespace slamd {
+
+namespace {
+
+std::string trim(const std::string& text) {
+  const auto begin = text.find_first_not_of(" \t\r\n");
+  if (begin == std::string::npos) return "";
+  const auto end = text.find_last_not_of(" \t\r\n");
+  return text.substr(begin, end - begin + 1);
+}
+
+// Shortest text that reads back as the same double.
+std::string formatDouble(double value) {
+  char buffer[64];
+  for (int precision = 6; precision <= 17; ++precision) {
+    std::snprintf(buffer, sizeof(buffer), "%.*g", precision, value);
+    if (std::strtod(buffer, nullptr) == value) break;
+  }
+  return buffer;
+}
+
+std::string scalarText(const cv::FileNode& node) {
+  if (node.isInt()) return std::to_string(static_cast<int>(node));
+  if (node.isReal()) return formatDouble(static_cast<double>(node));
+  if (node.isString()) return static_cast<std::string>(node);
+  return "";
+}
+
+void flatten(const cv::FileNode& node, const std::string& prefix,
+             std::map<std::string, std::string>& out) {
+  if (node.isMap()) {
+    for (auto it = node.begin(); it != node.end(); ++it) {
+      const cv::FileNode child = *it;
+      const std::string key = prefix.empty() ? child.name() : prefix + "." + child.name();
+      flatten(child, key, out);
+    }
+  } else if (node.isSeq()) {
+    std::string text = "[";
+    bool first = true;
+    for (auto it = node.begin(); it != node.end(); ++it) {
+      if (!first) text += ", ";
+      text += scalarText(*it);
+      first = false;
+    }
+    out[prefix] = text + "]";
+  } else if (!prefix.empty()) {
+    out[prefix] = scalarText(node);
+  }
+}
+
+bool parseDouble(const std::string& text, double& value) {
+  const std::string t = trim(text);
+  if (t.empty()) return false;
+  char* end = nullptr;
+  value = std::strtod(t.c_str(), &end);
+  return end == t.c_str() + t.size();
+}
+
+bool parseInt(const std::string& text, long long& value) {
+  const std::string t = trim(text);
+  if (t.empty()) return false;
+  char* end = nullptr;
+  value = std::strtoll(t.c_str(), &end, 10);
+  return end == t.c_str() + t.size();
+}
+
+std::string lower(std::string text) {
+  std::transform(text.begin(), text.end(), text.begin(),
+                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  return text;
+}
+
+Config parseStorage(cv::FileStorage& storage) {
+  Config config;
+  std::map<std::string, std::string> values;
+  flatten(storage.root(), "", values);
+  for (const auto& [key, value] : values) config.set(key, value);
+  return config;
+}
+
+}  // namespace
+
+Config Config::fromFile(const std::string& path) {
+  std::ifstream file(path);
+  if (!file) throw ConfigError("cannot open configuration file '" + path + "'");
+  std::stringstream text;
+  text << file.rdbuf();
+  try {
+    Config config = fromYamlString(text.str());
+    config.origin_ = path;
+    return config;
+  } catch (const ConfigError& e) {
+    throw ConfigError("configuration file '" + path + "': " + e.what());
+  }
+}
+
+Config Config::fromYamlString(const std::string& yaml_text) {
+  cv::FileStorage storage;
+  std::string text = yaml_text;
+  // cv::FileStorage recognises YAML in memory by its directive.
+  if (text.rfind("%YAML", 0) != 0) text = "%YAML:1.0\n---\n" + text;
+  try {
+    if (!storage.open(text, cv::FileStorage::READ | cv::FileStorage::MEMORY)) {
+      throw ConfigError("cannot parse configuration text");
+    }
+  } catch (const cv::Exception& e) {
+    throw ConfigError("cannot parse configuration text: " + e.err);
+  }
+  Config config = parseStorage(storage);
+  config.origin_ = "<string>";
+  return config;
+}
+
+void Config::applyOverride(const std::string& assignment) {
+  const auto eq = assignment.find('=');
+  if (eq == std::string::npos || eq == 0) {
+    throw ConfigError("override '" + assignment + "' is not of the form section.key=value");
+  }
+  const std::string key = trim(assignment.substr(0, eq));
+  if (key.find('.') == std::string::npos) {
+    throw ConfigError("override key '" + key + "' must name a section, as in section.key");
+  }
+  set(key, trim(assignment.substr(eq + 1)));
+}
+
+void Config::set(const std::string& key, const std::string& value) { values_[key] = value; }
+
+bool Config::has(const std::string& key) const { return values_.count(key) != 0; }
+
+const std::string* Config::rawValue(const std::string& key) const {
+  const auto it = values_.find(key);
+  return it == values_.end() ? nullptr : &it->second;
+}
+
+void Config::recordUsed(const std::string& key, const std::string& value) {
+  used_values_[key] = value;
+}
+
+void Config::fail(const std::string& key, const std::string& value,
+                  const std::string& allowed) const {
+  throw ConfigError("configuration " + origin_ + ": " + key + " = '" + value + "': " + allowed);
+}
+
+double Config::getDouble(const std::string& key, double default_value, double min_value,
+                         double max_value) {
+  double value = default_value;
+  if (const std::string* raw = rawValue(key)) {
+    if (!parseDouble(*raw, value) || !std::isfinite(value)) {
+      fail(key, *raw, "expected a number in [" + formatDouble(min_value) + ", " +
+                          formatDouble(max_value) + "]");
+    }
+  }
+  if (value < min_value || value > max_value) {
+    fail(key, formatDouble(value),
+         "out of range [" + formatDouble(min_value) + ", " + formatDouble(max_value) + "]");
+  }
+  recordUsed(key, formatDouble(value));
+  return value;
+}
+
+int Config::getInt(const std::string& key, int default_value, int min_value, int max_value) {
+  long long value = default_value;
+  if (const std::string* raw = rawValue(key)) {
+    if (!parseInt(*raw, value)) {
+      fail(key, *raw,
+           "expected an integer in [" + std::to_string(min_value) + ", " +
+               std::to_string(max_value) + "]");
+    }
+  }
+  if (value < min_value || value > max_value) {
+    fail(key, std::to_string(value),
+         "out of range [" + std::to_string(min_value) + ", " + std::to_string(max_value) + "]");
+  }
+  recordUsed(key, std::to_string(value));
+  return static_cast<int>(value);
+}
+
+bool Config::getBool(const std::string& key, bool default_value) {
+  bool value = default_value;
+  if (const std::string* raw = rawValue(key)) {
+    const std::string t = lower(trim(*raw));
+    if (t == "true" || t == "1" || t == "yes" || t == "on") {
+      value = true;
+    } else if (t == "false" || t == "0" || t == "no" || t == "off") {
+      value = false;
+    } else {
+      fail(key, *raw, "expected true or false");
+    }
+  }
+  recordUsed(key, value ? "true" : "false");
+  return value;
+}
+
+std::string Config::getString(const std::string& key, const std::string& default_value) {
+  const std::string* raw = rawValue(key);
+  std::string value = raw ? *raw : default_value;
+  recordUsed(key, value);
+  return value;
+}
+
+std::string Config::getChoice(const std::string& key, const std::string& default_value,
+                              const std::vector<std::string>& choices) {
+  const std::string* raw = rawValue(key);
+  const std::string value = raw ? trim(*raw) : default_value;
+  if (std::find(choices.begin(), choices.end(), value) == choices.end()) {
+    std::string allowed = "allowed values are";
+    for (std::size_t i = 0; i < choices.size(); ++i) {
+      allowed += (i == 0 ? " " : ", ") + choices[i];
+    }
+    fail(key, value, allowed);
+  }
+  recordUsed(key, value);
+  return value;
+}
+
+std::vector<double> Config::getDoubleList(const std::string& key,
+                                          const std::vector<double>& default_value,
+                                          std::size_t required_length) {
+  std::vector<double> values = default_value;
+  const std::string* raw = rawValue(key);
+  const std::string length_text =
+      required_length ? "a list of " + std::to_string(required_length) + " numbers"
+                      : "a list of numbers [a, b, ...]";
+  if (raw) {
+    std::string text = trim(*raw);
+    if (text.size() < 2 || text.front() != '[' || text.back() != ']') {
+      fail(key, *raw, "expected " + length_text);
+    }
+    values.clear();
+    std::stringstream items(text.substr(1, text.size() - 2));
+    std::string item;
+    while (std::getline(items, item, ',')) {
+      if (trim(item).empty()) continue;
+      double value = 0.0;
+      if (!parseDouble(item, value) || !std::isfinite(value)) {
+        fail(key, *raw, "expected " + length_text);
+      }
+      values.push_back(value);
+    }
+  }
+  if (required_length != 0 && values.size() != required_length) {
+    fail(key, raw ? *raw : "<default>", "expected " + length_text);
+  }
+  std::string used = "[";
+  for (std::size_t i = 0; i < values.size(); ++i) {
+    used += (i ? ", " : "") + formatDouble(values[i]);
+  }
+  recordUsed(key, used + "]");
+  return values;
+}
+
+std::vector<std::string> Config::unknownKeys() const {
+  std::vector<std::string> unknown;
+  for (const auto& entry : values_) {
+    if (used_values_.count(entry.first) == 0) unknown.push_back(entry.first);
+  }
+  return unknown;
+}
+
+std::string Config::effectiveYaml() const {
+  std::ostringstream out;
+  std::string current_section;
+  for (const auto& [key, value] : used_values_) {
+    const auto dot = key.find('.');
+    const std::string section = key.substr(0, dot);
+    if (dot == std::string::npos) {
+      out << key << ": " << value << "\n";
+      continue;
+    }
+    if (section != current_section) {
+      out << section << ":\n";
+      current_section = section;
+    }
+    const std::string rest = key.substr(dot + 1);
+    const bool needs_quotes = value.empty() || value.find_first_of(":#") != std::string::npos;
+    out << "  " << rest << ": " << (needs_quotes ? "\"" + value + "\"" : value) << "\n";
+  }
+  return out.str();
+}
+
+}  // namespace slamd

@@ -1,0 +1,152 @@
+#include <gtest/gtest.h>
+
+#include <fstream>
+
+#include "slamd/common/config.hpp"
+#include "test_data.hpp"
+
+namespace slamd {
+namespace {
+
+constexpr const char* kYaml = R"(
+tracking:
+  frontend: fovis
+  max_features: 800
+  ratio: 0.75
+  enabled: true
+camera:
+  distortion: [0.1, -0.2, 0.0, 0.0, 0.3]
+mapping:
+  resolution_m: 0.05
+)";
+
+TEST(Config, ReadsTypedValuesFromYaml) {
+  Config config = Config::fromYamlString(kYaml);
+  EXPECT_EQ(config.getChoice("tracking.frontend", "orb", {"orb", "sift", "fovis"}), "fovis");
+  EXPECT_EQ(config.getInt("tracking.max_features", 1000, 10, 10000), 800);
+  EXPECT_DOUBLE_EQ(config.getDouble("tracking.ratio", 0.8, 0.0, 1.0), 0.75);
+  EXPECT_TRUE(config.getBool("tracking.enabled", false));
+  const auto distortion = config.getDoubleList("camera.distortion", {}, 5);
+  ASSERT_EQ(distortion.size(), 5u);
+  EXPECT_DOUBLE_EQ(distortion[2], 0.0);
+  EXPECT_DOUBLE_EQ(distortion[4], 0.3);
+}
+
+TEST(Config, MissingKeysTakeTheirDefaults) {
+  Config config = Config::fromYamlString(kYaml);
+  EXPECT_EQ(config.getInt("tracking.pyramid_levels", 3, 1, 8), 3);
+  EXPECT_EQ(config.getString("daemon.pose_channel", "SLAMD_POSE"), "SLAMD_POSE");
+}
+
+TEST(Config, ReadsAFile) {
+  const auto dir = test::makeTempDir("config");
+  const auto path = dir / "test.yaml";
+  std::ofstream(path) << "%YAML:1.0\n---\n" << kYaml;
+  Config config = Config::fromFile(path.string());
+  EXPECT_EQ(config.getInt("tracking.max_features", 1000, 10, 10000), 800);
+  EXPECT_EQ(config.origin(), path.string());
+}
+
+TEST(Config, ReadsAFileWithoutYamlDirective) {
+  const auto dir = test::makeTempDir("config");
+  const auto path = dir / "plain.yaml";
+  std::ofstream(path) << kYaml;
+  Config config = Config::fromFile(path.string());
+  EXPECT_EQ(config.getInt("tracking.max_features", 1000, 10, 10000), 800);
+}
+
+TEST(Config, MissingFileIsAConfigError) {
+  EXPECT_THROW(Config::fromFile("/nonexistent/slamd.yaml"), ConfigError);
+}
+
+TEST(Config, OutOfRangeValueNamesKeyValueAndRange) {
+  Config config = Config::fromYamlString(kYaml);
+  try {
+    config.getInt("tracking.max_features", 1000, 1000, 5000);
+    FAIL() << "expected ConfigError";
+  } catch (const ConfigError& e) {
+    const std::string message = e.what();
+    EXPECT_NE(message.find("tracking.max_features"), std::string::npos) << message;
+    EXPECT_NE(message.find("800"), std::string::npos) << message;
+    EXPECT_NE(message.find("[1000, 5000]"), std::string::npos) << message;
+  }
+}
+
+TEST(Config, WrongTypesAreErrors) {
+  Config config = Config::fromYamlString("a:\n  number: abc\n  flag: maybe\n  list: 3\n  int: 2.5\n");
+  EXPECT_THROW(config.getDouble("a.number", 0.0, 0.0, 1.0), ConfigError);
+  EXPECT_THROW(config.getBool("a.flag", false), ConfigError);
+  EXPECT_THROW(config.getDoubleList("a.list", {}), ConfigError);
+  EXPECT_THROW(config.getInt("a.int", 0, 0, 10), ConfigError);
+}
+
+TEST(Config, ChoiceOutsideTheAllowedSetIsAnError) {
+  Config config = Config::fromYamlString("tracking:\n  frontend: surf\n");
+  try {
+    config.getChoice("tracking.frontend", "orb", {"orb", "sift", "fovis"});
+    FAIL() << "expected ConfigError";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("orb, sift, fovis"), std::string::npos) << e.what();
+  }
+}
+
+TEST(Config, ListOfTheWrongLengthIsAnError) {
+  Config config = Config::fromYamlString(kYaml);
+  EXPECT_THROW(config.getDoubleList("camera.distortion", {}, 4), ConfigError);
+}
+
+TEST(Config, UnknownKeysAreReported) {
+  Config config = Config::fromYamlString(kYaml);
+  config.getChoice("tracking.frontend", "orb", {"orb", "sift", "fovis"});
+  config.getInt("tracking.max_features", 1000, 10, 10000);
+  config.getDouble("tracking.ratio", 0.8, 0.0, 1.0);
+  config.getBool("tracking.enabled", false);
+  config.getDoubleList("camera.distortion", {}, 5);
+  const auto unknown = config.unknownKeys();
+  ASSERT_EQ(unknown.size(), 1u);
+  EXPECT_EQ(unknown[0], "mapping.resolution_m");
+}
+
+TEST(Config, OverrideReplacesFileValue) {
+  Config config = Config::fromYamlString(kYaml);
+  config.applyOverride("tracking.max_features=1500");
+  config.applyOverride("camera.distortion=[1, 2, 3, 4, 5]");
+  config.applyOverride("new.key = value");
+  EXPECT_EQ(config.getInt("tracking.max_features", 1000, 10, 10000), 1500);
+  EXPECT_DOUBLE_EQ(config.getDoubleList("camera.distortion", {}, 5)[4], 5.0);
+  EXPECT_EQ(config.getString("new.key", ""), "value");
+}
+
+TEST(Config, MalformedOverrideIsAnError) {
+  Config config;
+  EXPECT_THROW(config.applyOverride("no_equals_sign"), ConfigError);
+  EXPECT_THROW(config.applyOverride("nosection=3"), ConfigError);
+  EXPECT_THROW(config.applyOverride("=3"), ConfigError);
+}
+
+TEST(Config, EffectiveYamlListsEveryValueUsedIncludingDefaults) {
+  Config config = Config::fromYamlString(kYaml);
+  config.getInt("tracking.max_features", 1000, 10, 10000);
+  config.getInt("tracking.pyramid_levels", 3, 1, 8);
+  const std::string yaml = config.effectiveYaml();
+  EXPECT_NE(yaml.find("tracking:\n"), std::string::npos) << yaml;
+  EXPECT_NE(yaml.find("  max_features: 800\n"), std::string::npos) << yaml;
+  EXPECT_NE(yaml.find("  pyramid_levels: 3\n"), std::string::npos) << yaml;
+  // The effective YAML reads back to the same values.
+  Config reread = Config::fromYamlString(yaml);
+  EXPECT_EQ(reread.getInt("tracking.max_features", 0, 0, 10000), 800);
+}
+
+TEST(Config, EveryShippedConfigFileParses) {
+  const auto dir = std::filesystem::path(SLAMD_SOURCE_DIR) / "config";
+  int files = 0;
+  for (const auto& entry : std::filesystem::directory_iterator(dir)) {
+    if (entry.path().extension() != ".yaml") continue;
+    ++files;
+    EXPECT_NO_THROW(Config::fromFile(entry.path().string())) << entry.path();
+  }
+  EXPECT_GE(files, 6);
+}
+
+}  // namespace
+}  // namespace slamd
