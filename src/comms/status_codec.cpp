@@ -1,0 +1,70 @@
+#include "slamd/comms/status_codec.hpp"
+
+namespace slamd {
+
+std::vector<std::uint64_t> histogramDelta(const std::vector<std::uint64_t>& later,
+                                          const std::vector<std::uint64_t>& earlier) {
+  std::vector<std::uint64_t> delta = later;
+  for (std::size_t i = 0; i < delta.size() && i < earlier.size(); ++i) {
+    delta[i] = later[i] >= earlier[i] ? later[i] - earlier[i] : 0;
+  }
+  return delta;
+}
+
+slamd::status_t StatusBuilder::build(Utime now_utime, std::int64_t now_steady_ns,
+                                     const std::vector<StageStats>& stages,
+                                     const std::vector<std::uint64_t>& end_to_end_buckets,
+                                     const StatusExtras& extras) {
+  const double interval_s =
+      previous_steady_ns_ > 0 ? static_cast<double>(now_steady_ns - previous_steady_ns_) * 1e-9
+                              : 0.0;
+  slamd::status_t status;
+  status.utime = now_utime;
+  for (const StageStats& stage : stages) {
+    Previous& previous = previous_[stage.name];
+    slamd::stage_status_t out;
+    out.name = stage.name;
+    out.rate_hz = interval_s > 0.0
+                      ? static_cast<double>(stage.processed - previous.processed) / interval_s
+                      : 0.0;
+    const LatencySummary latency =
+        LatencyHistogram::summarize(histogramDelta(stage.latency_buckets, previous.latency_buckets));
+    out.latency_p50_ms = latency.p50_ms;
+    out.latency_p95_ms = latency.p95_ms;
+    out.latency_p99_ms = latency.p99_ms;
+    out.queue_depth = 0;
+    out.queue_capacity = 0;
+    out.drops = 0;
+    for (const EdgeStats& edge : stage.inputs) {
+      out.queue_depth += static_cast<int32_t>(edge.depth);
+      out.queue_capacity += static_cast<int32_t>(edge.capacity);
+      out.drops += static_cast<int64_t>(edge.dropped + edge.discarded);
+    }
+    out.errors = static_cast<int64_t>(stage.errors);
+    if (const auto it = extras.extra_errors.find(stage.name); it != extras.extra_errors.end()) {
+      out.errors += static_cast<int64_t>(it->second);
+    }
+    if (const auto it = extras.extra_drops.find(stage.name); it != extras.extra_drops.end()) {
+      out.drops += static_cast<int64_t>(it->second);
+    }
+    out.processed = static_cast<int64_t>(stage.processed);
+    status.stages.push_back(out);
+    previous.processed = stage.processed;
+    previous.latency_buckets = stage.latency_buckets;
+  }
+  status.num_stages = static_cast<int32_t>(status.stages.size());
+  const LatencySummary end_to_end =
+      LatencyHistogram::summarize(histogramDelta(end_to_end_buckets, previous_end_to_end_));
+  status.end_to_end_p50_ms = end_to_end.p50_ms;
+  status.end_to_end_p95_ms = end_to_end.p95_ms;
+  status.end_to_end_p99_ms = end_to_end.p99_ms;
+  previous_end_to_end_ = end_to_end_buckets;
+  status.tracking_state = static_cast<int8_t>(extras.tracking_state);
+  status.map_occupied_voxels = extras.map_occupied_voxels;
+  status.map_total_voxels = extras.map_total_voxels;
+  status.message = extras.message;
+  previous_steady_ns_ = now_steady_ns;
+  return status;
+}
+
+}  // namespace slamd
