@@ -35,7 +35,12 @@ std::optional<Message> decodeMessage(const void* data, std::size_t size,
   try {
     // lcm-gen's decoders check lengths against the buffer; anything they still throw (a vector
     // resize on a corrupt count the pre-check cannot see) is caught here.
+    // GCC 12 warns, after inlining, that lcm-gen's hash variable "may be used uninitialized" when
+    // the length check fails first; the generated code returns before using it.
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
     status = message.decode(data, 0, static_cast<int>(size));
+#pragma GCC diagnostic pop
   } catch (const std::exception& e) {
     if (error) *error = std::string("malformed ") + Message::getTypeName() + ": " + e.what();
     return std::nullopt;
