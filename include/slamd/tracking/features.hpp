@@ -1,0 +1,64 @@
+#pragma once
+// Feature extraction for visual odometry: ORB, SIFT and the FOVIS-style FAST + patch front end.
+//
+// A FeatureSet holds, per feature, the keypoint as detected (raw, distorted image pixels), the
+// undistorted pixel (ideal pinhole with the frame's K), the depth read at the raw pixel and the
+// 3D point in the camera optical frame (x right, y down, z forward; metres; NaN without depth).
+// Extractors are plain objects without threads, owned by VisualOdometry.
+
+#include <cmath>
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include <Eigen/Core>
+#include <opencv2/core.hpp>
+#include <opencv2/features2d.hpp>
+
+#include "slamd/common/camera_intrinsics.hpp"
+#include "slamd/tracking/tracking_config.hpp"
+
+namespace slamd {
+
+struct FeatureSet {
+  std::vector<cv::KeyPoint> keypoints;  ///< raw image pixels, as detected
+  cv::Mat descriptors;                  ///< one row per keypoint (CV_8U or CV_32F)
+  std::vector<Eigen::Vector2d> pixels;  ///< undistorted pixels (ideal pinhole), pixels
+  std::vector<Eigen::Vector3d> points;  ///< camera optical frame, metres; NaN without depth
+  std::vector<float> scale;             ///< keypoint scale relative to level 0 (>= 1)
+  int num_with_depth = 0;
+
+  std::size_t size() const { return keypoints.size(); }
+  bool hasDepth(std::size_t i) const { return !std::isnan(points[i].z()); }
+};
+
+/// Descriptor distance conventions of a front end.
+enum class DescriptorNorm { kHamming, kL2, kSad };
+
+class FeatureExtractor {
+ public:
+  virtual ~FeatureExtractor() = default;
+  /// Detects features in gray (CV_8UC1) and fills keypoints, descriptors and scale. Never throws
+  /// for image content; an empty result means no features.
+  virtual void extract(const cv::Mat& gray, FeatureSet& features) = 0;
+  virtual DescriptorNorm norm() const = 0;
+};
+
+std::unique_ptr<FeatureExtractor> makeFeatureExtractor(const TrackingConfig& config);
+
+/// Undistorts keypoints (when configured and the intrinsics have plumb-bob coefficients), reads
+/// depth at each raw keypoint (CV_32F metres, NaN = none; nearest pixel, with a 3x3 consistency
+/// check) and back-projects the points.
+void attachGeometry(const cv::Mat& depth_m, const CameraIntrinsics& intrinsics,
+                    const TrackingConfig& config, FeatureSet& features);
+
+/// Keeps at most max_total features, at most max_total / (cols * rows) per grid cell (strongest
+/// response first); cells left under quota give their share to the strongest remaining ones.
+std::vector<cv::KeyPoint> bucketKeypoints(const std::vector<cv::KeyPoint>& keypoints,
+                                          cv::Size image_size, int cols, int rows,
+                                          int max_total);
+
+/// Distance between descriptor rows a.row(i) and b.row(j) in the given norm.
+int descriptorDistance(const cv::Mat& a, int i, const cv::Mat& b, int j, DescriptorNorm norm);
+
+}  // namespace slamd

@@ -1,0 +1,157 @@
+#pragma once
+// VisualOdometry: RGB-D frame-to-keyframe visual odometry with ORB, SIFT or FOVIS-style features.
+//
+// Usage (one thread owns the object; there are no threads inside):
+//   VisualOdometry vo(TrackingConfig::load(config));
+//   for each frame:
+//     OdometryResult r = vo.processFrame(frame_ptr);   // never throws on bad data
+//     if (r.status == OdometryStatus::kOk) use(r.T_world_camera, r.covariance);
+//     if (r.keyframe) backend.add(r.keyframe);
+//
+// Frames: camera optical frame x right, y down, z forward. The world frame is the first camera
+// frame. T_a_b maps points from frame b into frame a. Covariances are 6x6 in the order x y z rx ry
+// rz (metres^2, radians^2) for a right perturbation T = T_est * exp(xi), as in common/se3.hpp.
+//
+// Per frame: features are extracted (with bucketing and undistortion), matched against the
+// current keyframe (guided by the constant-velocity prediction, or by descriptor over the whole
+// image when guidance fails), the motion is estimated by RANSAC + closed-form rigid fit (or a
+// maximum consistent clique for FOVIS) and refined robustly on SE(3). When the keyframe cannot be
+// tracked the previous frame is tried. A frame becomes a keyframe when inliers, overlap or motion
+// since the keyframe cross thresholds. Failed frames are bridged by constant-velocity prediction
+// for tracking.max_predicted_frames frames; then tracking is LOST and the next trackable frame
+// starts a new segment (a new keyframe at the last predicted pose).
+
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <random>
+#include <vector>
+
+#include "slamd/common/pose_estimate.hpp"
+#include "slamd/common/rgbd_frame.hpp"
+#include "slamd/common/se3.hpp"
+#include "slamd/tracking/features.hpp"
+#include "slamd/tracking/motion_estimation.hpp"
+#include "slamd/tracking/tracking_config.hpp"
+
+namespace slamd {
+
+/// Values match slamd.odometry_t.STATUS_*.
+enum class OdometryStatus : std::int8_t {
+  kOk = 0,
+  kInsufficientFeatures = 1,
+  kInsufficientInliers = 2,
+  kOptimizationFailure = 3,
+  kNoDepth = 4,
+};
+
+const char* odometryStatusName(OdometryStatus status);
+
+/// A keyframe: what mapping and the back end consume. Immutable once published.
+struct Keyframe {
+  std::int64_t id = 0;           ///< 0, 1, 2, ... across segments
+  std::int64_t segment = 0;      ///< tracking segment (incremented after LOST)
+  Utime utime = 0;               ///< capture time of the frame
+  std::int64_t frame_sequence = 0;
+  SE3 T_world_camera = SE3::Identity();  ///< odometry pose when the keyframe was made
+  CameraIntrinsics intrinsics;
+  FeatureSet features;   ///< keypoints, descriptors, undistorted pixels, 3D points (camera frame)
+  RgbdFramePtr frame;    ///< images (null when processFrame got a reference, not a pointer)
+};
+using KeyframePtr = std::shared_ptr<const Keyframe>;
+
+struct OdometryStats {
+  int num_features = 0;         ///< features detected in the current frame
+  int num_features_with_depth = 0;
+  int num_matches = 0;          ///< putative matches with the reference
+  int num_inliers = 0;          ///< matches consistent with the estimated motion
+  double reprojection_error_px = 0.0;  ///< RMS over the inliers
+  bool used_guided_matching = false;
+  bool used_previous_frame = false;    ///< the keyframe failed; tracked from the previous frame
+  double time_features_ms = 0.0;       ///< extraction + undistortion + depth
+  double time_matching_ms = 0.0;
+  double time_motion_ms = 0.0;         ///< RANSAC / clique + refinement
+  double time_total_ms = 0.0;
+};
+
+struct OdometryResult {
+  Utime utime = 0;
+  std::int64_t sequence = 0;
+  OdometryStatus status = OdometryStatus::kNoDepth;
+  TrackingState tracking_state = TrackingState::kNotInitialized;
+  /// Motion since the previous processed frame (its output pose, predicted or not):
+  /// T_prev_curr = T_world_prev^-1 * T_world_curr.
+  SE3 T_prev_curr = SE3::Identity();
+  Utime prev_utime = 0;
+  /// Covariance of T_prev_curr. When the frame is measured against a keyframe older than the
+  /// previous frame, this is the covariance of the keyframe measurement (a conservative bound).
+  Matrix6d covariance = Matrix6d::Identity();
+  /// The measurement itself: T_ref_curr against the reference (keyframe or previous frame) with
+  /// its covariance from the normal equations.
+  SE3 T_ref_curr = SE3::Identity();
+  Matrix6d covariance_ref_curr = Matrix6d::Identity();
+  Utime ref_utime = 0;
+  std::int64_t reference_keyframe_id = -1;  ///< -1 when measured from the previous frame
+  SE3 T_world_camera = SE3::Identity();
+  std::int64_t segment = 0;
+  bool is_keyframe = false;
+  KeyframePtr keyframe;   ///< set when is_keyframe
+  OdometryStats stats;
+};
+
+class VisualOdometry {
+ public:
+  explicit VisualOdometry(const TrackingConfig& config = TrackingConfig());
+  ~VisualOdometry();
+  VisualOdometry(const VisualOdometry&) = delete;
+  VisualOdometry& operator=(const VisualOdometry&) = delete;
+
+  /// Processes the next frame (timestamps increasing). gray or color_bgr and depth_m (CV_32FC1
+  /// metres, NaN = none) of the size given by the frame's intrinsics. Never throws on bad data.
+  OdometryResult processFrame(const RgbdFramePtr& frame);
+  OdometryResult processFrame(const RgbdFrame& frame);
+
+  /// Forgets everything; the next frame starts a new segment at the identity.
+  void reset();
+
+  const TrackingConfig& config() const { return config_; }
+  KeyframePtr currentKeyframe() const { return keyframe_; }
+  TrackingState state() const { return state_; }
+
+ private:
+  struct TrackAttempt;
+  struct CurrentFrame;
+
+  OdometryResult process(const RgbdFrame& frame, const RgbdFramePtr& frame_ptr);
+  void matchGuided(const FeatureSet& ref, const SE3& T_ref_curr_prior, const CurrentFrame& curr,
+                   double radius_px, std::vector<Correspondence>& matches) const;
+  void matchByDescriptor(const FeatureSet& ref, const CurrentFrame& curr,
+                         std::vector<Correspondence>& matches) const;
+  TrackAttempt track(const FeatureSet& ref, const SE3& T_ref_curr_prior, bool have_prior,
+                     const CurrentFrame& curr);
+  SE3 alignRotation(const cv::Mat& small_curr, const CameraIntrinsics& K) const;
+  KeyframePtr makeKeyframe(const CurrentFrame& curr, const RgbdFrame& frame,
+                           const RgbdFramePtr& frame_ptr, const SE3& T_world_camera);
+
+  TrackingConfig config_;
+  std::unique_ptr<FeatureExtractor> extractor_;
+  std::mt19937 rng_{42};
+
+  TrackingState state_ = TrackingState::kNotInitialized;
+  KeyframePtr keyframe_;
+  std::int64_t next_keyframe_id_ = 0;
+  std::int64_t segment_ = 0;
+
+  // The previous frame (for fallback tracking and the motion model).
+  std::shared_ptr<const FeatureSet> prev_features_;
+  bool prev_tracked_ = false;
+  Utime prev_utime_ = 0;
+  SE3 T_world_prev_ = SE3::Identity();
+  SE3 velocity_prev_curr_ = SE3::Identity();  ///< last frame-to-frame motion
+  bool have_velocity_ = false;
+  Matrix6d last_covariance_ = Matrix6d::Identity() * 1e-6;
+  int failed_frames_ = 0;
+  cv::Mat prev_small_;  ///< blurred 80x60 image of the previous frame (FOVIS rotation alignment)
+};
+
+}  // namespace slamd

@@ -1,0 +1,334 @@
+#include "slamd/tracking/features.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include <opencv2/calib3d.hpp>
+#include <opencv2/core/hal/hal.hpp>
+#include <opencv2/imgproc.hpp>
+
+namespace slamd {
+namespace {
+
+constexpr int kPatchSize = 9;  // FOVIS patch descriptor: 9x9 pixels
+constexpr int kPatchHalf = kPatchSize / 2;
+
+/// Sub-pixel refinement of level-0 corners (others keep their position).
+void refineSubpixel(const cv::Mat& gray, std::vector<cv::KeyPoint>& keypoints) {
+  std::vector<cv::Point2f> corners;
+  std::vector<int> index;
+  const int margin = 4;
+  for (std::size_t i = 0; i < keypoints.size(); ++i) {
+    const cv::Point2f& p = keypoints[i].pt;
+    if (keypoints[i].octave == 0 && p.x >= margin && p.y >= margin &&
+        p.x < static_cast<float>(gray.cols - margin) &&
+        p.y < static_cast<float>(gray.rows - margin)) {
+      corners.push_back(p);
+      index.push_back(static_cast<int>(i));
+    }
+  }
+  if (corners.empty()) return;
+  cv::cornerSubPix(gray, corners, cv::Size(2, 2), cv::Size(-1, -1),
+                   cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 6, 0.02));
+  for (std::size_t k = 0; k < corners.size(); ++k) {
+    cv::KeyPoint& kp = keypoints[static_cast<std::size_t>(index[k])];
+    // cornerSubPix can wander on edges; keep moves within one pixel.
+    if (std::abs(corners[k].x - kp.pt.x) < 1.0f && std::abs(corners[k].y - kp.pt.y) < 1.0f) {
+      kp.pt = corners[k];
+    }
+  }
+}
+
+/// Keeps the selected rows of keypoints/descriptors.
+void selectFeatures(const std::vector<cv::KeyPoint>& all, const cv::Mat& all_desc,
+                    const std::vector<int>& keep, FeatureSet& out) {
+  out.keypoints.clear();
+  out.keypoints.reserve(keep.size());
+  out.descriptors.create(static_cast<int>(keep.size()), all_desc.cols, all_desc.type());
+  for (std::size_t k = 0; k < keep.size(); ++k) {
+    out.keypoints.push_back(all[static_cast<std::size_t>(keep[k])]);
+    all_desc.row(keep[k]).copyTo(out.descriptors.row(static_cast<int>(k)));
+  }
+}
+
+std::vector<int> bucketIndices(const std::vector<cv::KeyPoint>& keypoints, cv::Size size,
+                               int cols, int rows, int max_total) {
+  const int cells = cols * rows;
+  std::vector<int> order(keypoints.size());
+  for (std::size_t i = 0; i < order.size(); ++i) order[i] = static_cast<int>(i);
+  std::stable_sort(order.begin(), order.end(), [&](int a, int b) {
+    return keypoints[static_cast<std::size_t>(a)].response >
+           keypoints[static_cast<std::size_t>(b)].response;
+  });
+  const int quota = std::max(1, max_total / cells);
+  std::vector<int> count(static_cast<std::size_t>(cells), 0);
+  std::vector<int> keep;
+  std::vector<int> spill;
+  keep.reserve(static_cast<std::size_t>(max_total));
+  for (int i : order) {
+    const cv::Point2f& p = keypoints[static_cast<std::size_t>(i)].pt;
+    const int cx = std::clamp(static_cast<int>(p.x * static_cast<float>(cols) /
+                                               static_cast<float>(size.width)),
+                              0, cols - 1);
+    const int cy = std::clamp(static_cast<int>(p.y * static_cast<float>(rows) /
+                                               static_cast<float>(size.height)),
+                              0, rows - 1);
+    int& n = count[static_cast<std::size_t>(cy * cols + cx)];
+    if (n < quota) {
+      ++n;
+      keep.push_back(i);
+    } else {
+      spill.push_back(i);
+    }
+  }
+  for (int i : spill) {
+    if (static_cast<int>(keep.size()) >= max_total) break;
+    keep.push_back(i);
+  }
+  if (static_cast<int>(keep.size()) > max_total) keep.resize(static_cast<std::size_t>(max_total));
+  return keep;
+}
+
+/// detectAndCompute, then spatial bucketing of the result.
+void detectBucketed(cv::Feature2D& detector, const cv::Mat& gray, const TrackingConfig& config,
+                    FeatureSet& features) {
+  std::vector<cv::KeyPoint> keypoints;
+  cv::Mat descriptors;
+  detector.detectAndCompute(gray, cv::noArray(), keypoints, descriptors);
+  features = FeatureSet();
+  if (keypoints.empty() || descriptors.empty()) return;
+  const std::vector<int> keep = bucketIndices(keypoints, gray.size(), config.grid_cols,
+                                              config.grid_rows, config.max_features);
+  selectFeatures(keypoints, descriptors, keep, features);
+}
+
+class OrbExtractor : public FeatureExtractor {
+ public:
+  explicit OrbExtractor(const TrackingConfig& config) : config_(config) {
+    // Detect more than needed; bucketing then spreads the kept ones over the image.
+    orb_ = cv::ORB::create(config.max_features * 3 / 2, 1.2f, config.orb_levels, 19, 0, 2,
+                           cv::ORB::HARRIS_SCORE, 31, config.orb_fast_threshold);
+  }
+  void extract(const cv::Mat& gray, FeatureSet& features) override {
+    detectBucketed(*orb_, gray, config_, features);
+    if (config_.subpixel) refineSubpixel(gray, features.keypoints);
+    features.scale.resize(features.keypoints.size());
+    for (std::size_t i = 0; i < features.keypoints.size(); ++i) {
+      features.scale[i] = std::pow(1.2f, static_cast<float>(features.keypoints[i].octave));
+    }
+  }
+  DescriptorNorm norm() const override { return DescriptorNorm::kHamming; }
+
+ private:
+  TrackingConfig config_;
+  cv::Ptr<cv::ORB> orb_;
+};
+
+class SiftExtractor : public FeatureExtractor {
+ public:
+  explicit SiftExtractor(const TrackingConfig& config) : config_(config) {
+    sift_ = cv::SIFT::create(config.max_features * 3 / 2);
+  }
+  void extract(const cv::Mat& gray, FeatureSet& features) override {
+    detectBucketed(*sift_, gray, config_, features);
+    features.scale.resize(features.keypoints.size());
+    for (std::size_t i = 0; i < features.keypoints.size(); ++i) {
+      // SIFT packs the octave in the low byte (signed; -1 = the upsampled octave). Its keypoints
+      // are already sub-pixel.
+      int octave = features.keypoints[i].octave & 255;
+      if (octave >= 128) octave -= 256;
+      features.scale[i] = std::max(1.0f, std::ldexp(1.0f, octave));
+    }
+  }
+  DescriptorNorm norm() const override { return DescriptorNorm::kL2; }
+
+ private:
+  TrackingConfig config_;
+  cv::Ptr<cv::SIFT> sift_;
+};
+
+/// FOVIS-style: FAST on a Gaussian pyramid with a threshold adapted towards the wanted feature
+/// count, bucketing, and 9x9 brightness-normalised patch descriptors compared by SAD.
+class FovisExtractor : public FeatureExtractor {
+ public:
+  explicit FovisExtractor(const TrackingConfig& config)
+      : config_(config), threshold_(config.fovis_fast_threshold) {}
+
+  void extract(const cv::Mat& gray, FeatureSet& features) override {
+    pyramid_.resize(static_cast<std::size_t>(config_.fovis_levels));
+    pyramid_[0] = gray;
+    for (int l = 1; l < config_.fovis_levels; ++l) {
+      cv::pyrDown(pyramid_[static_cast<std::size_t>(l - 1)], pyramid_[static_cast<std::size_t>(l)]);
+    }
+    std::vector<cv::KeyPoint> all;
+    const int margin = kPatchHalf + 2;
+    for (int l = 0; l < config_.fovis_levels; ++l) {
+      const cv::Mat& img = pyramid_[static_cast<std::size_t>(l)];
+      if (img.cols < 2 * margin + 1 || img.rows < 2 * margin + 1) break;
+      std::vector<cv::KeyPoint> level_kps;
+      cv::FAST(img, level_kps, threshold_, true);
+      const float s = static_cast<float>(1 << l);
+      for (cv::KeyPoint kp : level_kps) {
+        if (kp.pt.x < static_cast<float>(margin) || kp.pt.y < static_cast<float>(margin) ||
+            kp.pt.x >= static_cast<float>(img.cols - margin) ||
+            kp.pt.y >= static_cast<float>(img.rows - margin)) {
+          continue;
+        }
+        kp.octave = l;
+        // Level coordinates map to level 0 so that pixel centres stay aligned.
+        kp.pt = cv::Point2f((kp.pt.x + 0.5f) * s - 0.5f, (kp.pt.y + 0.5f) * s - 0.5f);
+        kp.size = 7.0f * s;
+        all.push_back(kp);
+      }
+    }
+    // Adapt the threshold: aim at 1.5x the kept count before bucketing.
+    const int wanted = config_.max_features * 3 / 2;
+    const int n = static_cast<int>(all.size());
+    if (n > wanted * 13 / 10) {
+      threshold_ = std::min(100, threshold_ + std::max(1, threshold_ / 10));
+    } else if (n < wanted * 7 / 10) {
+      threshold_ = std::max(5, threshold_ - std::max(1, threshold_ / 10));
+    }
+    features = FeatureSet();
+    if (all.empty()) return;
+    const std::vector<int> keep = bucketIndices(all, gray.size(), config_.grid_cols,
+                                                config_.grid_rows, config_.max_features);
+    features.keypoints.reserve(keep.size());
+    for (int i : keep) features.keypoints.push_back(all[static_cast<std::size_t>(i)]);
+    // Descriptors at the detection position (before sub-pixel refinement).
+    features.descriptors.create(static_cast<int>(keep.size()), kPatchSize * kPatchSize, CV_8U);
+    for (std::size_t k = 0; k < features.keypoints.size(); ++k) {
+      const cv::KeyPoint& kp = features.keypoints[k];
+      const int l = kp.octave;
+      const float s = static_cast<float>(1 << l);
+      const int u = static_cast<int>(std::lround((kp.pt.x + 0.5f) / s - 0.5f));
+      const int v = static_cast<int>(std::lround((kp.pt.y + 0.5f) / s - 0.5f));
+      const cv::Mat& img = pyramid_[static_cast<std::size_t>(l)];
+      int sum = 0;
+      for (int dy = -kPatchHalf; dy <= kPatchHalf; ++dy) {
+        const std::uint8_t* row = img.ptr<std::uint8_t>(v + dy);
+        for (int dx = -kPatchHalf; dx <= kPatchHalf; ++dx) sum += row[u + dx];
+      }
+      const int mean = sum / (kPatchSize * kPatchSize);
+      std::uint8_t* out = features.descriptors.ptr<std::uint8_t>(static_cast<int>(k));
+      int j = 0;
+      for (int dy = -kPatchHalf; dy <= kPatchHalf; ++dy) {
+        const std::uint8_t* row = img.ptr<std::uint8_t>(v + dy);
+        for (int dx = -kPatchHalf; dx <= kPatchHalf; ++dx) {
+          out[j++] = cv::saturate_cast<std::uint8_t>(row[u + dx] - mean + 128);
+        }
+      }
+    }
+    if (config_.subpixel) refineSubpixel(gray, features.keypoints);
+    features.scale.resize(features.keypoints.size());
+    for (std::size_t i = 0; i < features.keypoints.size(); ++i) {
+      features.scale[i] = static_cast<float>(1 << features.keypoints[i].octave);
+    }
+  }
+  DescriptorNorm norm() const override { return DescriptorNorm::kSad; }
+
+ private:
+  TrackingConfig config_;
+  int threshold_;
+  std::vector<cv::Mat> pyramid_;
+};
+
+}  // namespace
+
+std::unique_ptr<FeatureExtractor> makeFeatureExtractor(const TrackingConfig& config) {
+  switch (config.frontend) {
+    case FrontEndType::kSift:
+      return std::make_unique<SiftExtractor>(config);
+    case FrontEndType::kFovis:
+      return std::make_unique<FovisExtractor>(config);
+    case FrontEndType::kOrb:
+      break;
+  }
+  return std::make_unique<OrbExtractor>(config);
+}
+
+std::vector<cv::KeyPoint> bucketKeypoints(const std::vector<cv::KeyPoint>& keypoints,
+                                          cv::Size image_size, int cols, int rows,
+                                          int max_total) {
+  std::vector<cv::KeyPoint> out;
+  for (int i : bucketIndices(keypoints, image_size, cols, rows, max_total)) {
+    out.push_back(keypoints[static_cast<std::size_t>(i)]);
+  }
+  return out;
+}
+
+void attachGeometry(const cv::Mat& depth_m, const CameraIntrinsics& K,
+                    const TrackingConfig& config, FeatureSet& features) {
+  const std::size_t n = features.keypoints.size();
+  features.pixels.resize(n);
+  features.points.resize(n);
+  features.num_with_depth = 0;
+  if (n == 0) return;
+  const bool distorted =
+      config.undistort && K.distortion_model == DistortionModel::kPlumbBob &&
+      std::any_of(K.distortion.begin(), K.distortion.end(), [](double d) { return d != 0.0; });
+  if (distorted) {
+    std::vector<cv::Point2f> raw(n);
+    for (std::size_t i = 0; i < n; ++i) raw[i] = features.keypoints[i].pt;
+    const cv::Matx33d camera(K.fx, 0, K.cx, 0, K.fy, K.cy, 0, 0, 1);
+    const cv::Matx<double, 1, 5> dist(K.distortion[0], K.distortion[1], K.distortion[2],
+                                      K.distortion[3], K.distortion[4]);
+    std::vector<cv::Point2f> undistorted;
+    cv::undistortPoints(raw, undistorted, camera, dist, cv::noArray(), camera);
+    for (std::size_t i = 0; i < n; ++i) {
+      features.pixels[i] = Eigen::Vector2d(undistorted[i].x, undistorted[i].y);
+    }
+  } else {
+    for (std::size_t i = 0; i < n; ++i) {
+      features.pixels[i] = Eigen::Vector2d(features.keypoints[i].pt.x, features.keypoints[i].pt.y);
+    }
+  }
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const bool have_depth = !depth_m.empty() && depth_m.type() == CV_32FC1;
+  for (std::size_t i = 0; i < n; ++i) {
+    features.points[i] = Eigen::Vector3d(nan, nan, nan);
+    if (!have_depth) continue;
+    const int u = static_cast<int>(std::lround(features.keypoints[i].pt.x));
+    const int v = static_cast<int>(std::lround(features.keypoints[i].pt.y));
+    if (u < 1 || v < 1 || u >= depth_m.cols - 1 || v >= depth_m.rows - 1) continue;
+    const double z = depth_m.at<float>(v, u);
+    if (!(z >= config.min_depth_m && z <= config.max_depth_m)) continue;
+    // Reject corners on depth discontinuities: the 3x3 neighbourhood must agree with the centre.
+    const double tolerance = 0.03 * z + 0.01;
+    bool consistent = true;
+    for (int dy = -1; dy <= 1 && consistent; ++dy) {
+      const float* row = depth_m.ptr<float>(v + dy);
+      for (int dx = -1; dx <= 1; ++dx) {
+        const double zn = row[u + dx];
+        if (std::isfinite(zn) && std::abs(zn - z) > tolerance) {
+          consistent = false;
+          break;
+        }
+      }
+    }
+    if (!consistent) continue;
+    features.points[i] = K.backProject(features.pixels[i].x(), features.pixels[i].y(), z);
+    ++features.num_with_depth;
+  }
+}
+
+int descriptorDistance(const cv::Mat& a, int i, const cv::Mat& b, int j, DescriptorNorm norm) {
+  switch (norm) {
+    case DescriptorNorm::kHamming:
+      return cv::hal::normHamming(a.ptr<std::uint8_t>(i), b.ptr<std::uint8_t>(j), a.cols);
+    case DescriptorNorm::kL2:
+      return static_cast<int>(
+          std::sqrt(cv::hal::normL2Sqr_(a.ptr<float>(i), b.ptr<float>(j), a.cols)));
+    case DescriptorNorm::kSad: {
+      const std::uint8_t* pa = a.ptr<std::uint8_t>(i);
+      const std::uint8_t* pb = b.ptr<std::uint8_t>(j);
+      int sum = 0;
+      for (int k = 0; k < a.cols; ++k) sum += std::abs(int{pa[k]} - int{pb[k]});
+      return sum;
+    }
+  }
+  return std::numeric_limits<int>::max();
+}
+
+}  // namespace slamd

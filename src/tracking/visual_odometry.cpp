@@ -1,0 +1,653 @@
+#include "slamd/tracking/visual_odometry.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include <opencv2/imgproc.hpp>
+
+namespace slamd {
+namespace {
+
+constexpr double kGridCellPx = 16.0;
+constexpr int kSiftMaxDistance = 350;    // L2 between SIFT descriptors (norm about 512)
+constexpr double kLostCovariance = 1e2;  // metres^2 / radians^2: "unknown"
+
+double msSince(std::int64_t start_ns) {
+  return static_cast<double>(steadyNowNs() - start_ns) * 1e-6;
+}
+
+double bilinear(const cv::Mat& img, double u, double v) {
+  const int x = static_cast<int>(std::floor(u));
+  const int y = static_cast<int>(std::floor(v));
+  const double ax = u - x;
+  const double ay = v - y;
+  const float* r0 = img.ptr<float>(y);
+  const float* r1 = img.ptr<float>(y + 1);
+  const double a00 = r0[x], a01 = r0[x + 1], a10 = r1[x], a11 = r1[x + 1];
+  return (1 - ay) * ((1 - ax) * a00 + ax * a01) + ay * ((1 - ax) * a10 + ax * a11);
+}
+
+}  // namespace
+
+const char* odometryStatusName(OdometryStatus status) {
+  switch (status) {
+    case OdometryStatus::kOk:
+      return "OK";
+    case OdometryStatus::kInsufficientFeatures:
+      return "INSUFFICIENT_FEATURES";
+    case OdometryStatus::kInsufficientInliers:
+      return "INSUFFICIENT_INLIERS";
+    case OdometryStatus::kOptimizationFailure:
+      return "OPTIMIZATION_FAILURE";
+    case OdometryStatus::kNoDepth:
+      return "NO_DEPTH";
+  }
+  return "UNKNOWN";
+}
+
+/// The current frame's features with a grid over undistorted pixels for guided search.
+struct VisualOdometry::CurrentFrame {
+  std::shared_ptr<FeatureSet> features;
+  CameraIntrinsics K;
+  int grid_cols = 0;
+  int grid_rows = 0;
+  std::vector<std::vector<int>> grid;
+
+  void buildGrid() {
+    grid_cols = std::max(1, static_cast<int>(std::ceil(K.width / kGridCellPx)));
+    grid_rows = std::max(1, static_cast<int>(std::ceil(K.height / kGridCellPx)));
+    grid.assign(static_cast<std::size_t>(grid_cols * grid_rows), {});
+    for (std::size_t i = 0; i < features->size(); ++i) {
+      const Eigen::Vector2d& p = features->pixels[i];
+      const int cx = std::clamp(static_cast<int>(p.x() / kGridCellPx), 0, grid_cols - 1);
+      const int cy = std::clamp(static_cast<int>(p.y() / kGridCellPx), 0, grid_rows - 1);
+      grid[static_cast<std::size_t>(cy * grid_cols + cx)].push_back(static_cast<int>(i));
+    }
+  }
+};
+
+struct VisualOdometry::TrackAttempt {
+  OdometryStatus status = OdometryStatus::kInsufficientInliers;
+  SE3 T_ref_curr = SE3::Identity();
+  Matrix6d covariance = Matrix6d::Identity();
+  int num_matches = 0;
+  int num_inliers = 0;
+  double rms_px = 0.0;
+  bool guided = false;
+  double time_matching_ms = 0.0;
+  double time_motion_ms = 0.0;
+};
+
+VisualOdometry::VisualOdometry(const TrackingConfig& config)
+    : config_(config), extractor_(makeFeatureExtractor(config)) {}
+
+VisualOdometry::~VisualOdometry() = default;
+
+void VisualOdometry::reset() {
+  state_ = TrackingState::kNotInitialized;
+  keyframe_.reset();
+  prev_features_.reset();
+  prev_tracked_ = false;
+  T_world_prev_ = SE3::Identity();
+  velocity_prev_curr_ = SE3::Identity();
+  have_velocity_ = false;
+  failed_frames_ = 0;
+  prev_small_.release();
+  ++segment_;
+}
+
+OdometryResult VisualOdometry::processFrame(const RgbdFramePtr& frame) {
+  if (!frame) {
+    RgbdFrame empty;
+    return process(empty, nullptr);
+  }
+  return process(*frame, frame);
+}
+
+OdometryResult VisualOdometry::processFrame(const RgbdFrame& frame) {
+  return process(frame, nullptr);
+}
+
+void VisualOdometry::matchGuided(const FeatureSet& ref, const SE3& T_ref_curr_prior,
+                                 const CurrentFrame& curr, double radius_px,
+                                 std::vector<Correspondence>& matches) const {
+  matches.clear();
+  const FeatureSet& cf = *curr.features;
+  if (ref.descriptors.empty() || cf.descriptors.empty() ||
+      ref.descriptors.type() != cf.descriptors.type() ||
+      ref.descriptors.cols != cf.descriptors.cols) {
+    return;
+  }
+  const DescriptorNorm norm = extractor_->norm();
+  const int max_distance = norm == DescriptorNorm::kHamming ? config_.max_descriptor_distance
+                           : norm == DescriptorNorm::kL2    ? kSiftMaxDistance
+                                                            : config_.fovis_max_sad;
+  const double ratio = std::min(1.0, config_.match_ratio + 0.1);
+  const SE3 T_curr_ref = T_ref_curr_prior.inverse();
+  const CameraIntrinsics& K = curr.K;
+  // Best match per current feature: (distance, index into matches).
+  std::vector<std::pair<int, int>> owner(cf.size(), {std::numeric_limits<int>::max(), -1});
+  for (std::size_t i = 0; i < ref.size(); ++i) {
+    if (!ref.hasDepth(i)) continue;
+    const Eigen::Vector3d q = T_curr_ref * ref.points[i];
+    if (q.z() <= 0.05) continue;
+    const Eigen::Vector2d uv = K.project(q);
+    const double r = radius_px * std::max(1.0, static_cast<double>(ref.scale[i]));
+    if (uv.x() < -r || uv.y() < -r || uv.x() > K.width - 1 + r || uv.y() > K.height - 1 + r) {
+      continue;
+    }
+    const int x0 = std::clamp(static_cast<int>((uv.x() - r) / kGridCellPx), 0, curr.grid_cols - 1);
+    const int x1 = std::clamp(static_cast<int>((uv.x() + r) / kGridCellPx), 0, curr.grid_cols - 1);
+    const int y0 = std::clamp(static_cast<int>((uv.y() - r) / kGridCellPx), 0, curr.grid_rows - 1);
+    const int y1 = std::clamp(static_cast<int>((uv.y() + r) / kGridCellPx), 0, curr.grid_rows - 1);
+    int best = std::numeric_limits<int>::max();
+    int second = std::numeric_limits<int>::max();
+    int best_j = -1;
+    const int ref_octave = ref.keypoints[i].octave;
+    for (int cy = y0; cy <= y1; ++cy) {
+      for (int cx = x0; cx <= x1; ++cx) {
+        for (int j : curr.grid[static_cast<std::size_t>(cy * curr.grid_cols + cx)]) {
+          const std::size_t ju = static_cast<std::size_t>(j);
+          if ((cf.pixels[ju] - uv).squaredNorm() > r * r) continue;
+          if (norm == DescriptorNorm::kHamming && std::abs(cf.keypoints[ju].octave - ref_octave) > 1) {
+            continue;
+          }
+          if (norm == DescriptorNorm::kSad && cf.keypoints[ju].octave != ref_octave) continue;
+          const int d = descriptorDistance(ref.descriptors, static_cast<int>(i), cf.descriptors, j,
+                                           norm);
+          if (d < best) {
+            second = best;
+            best = d;
+            best_j = j;
+          } else if (d < second) {
+            second = d;
+          }
+        }
+      }
+    }
+    if (best_j < 0 || best > max_distance) continue;
+    if (second != std::numeric_limits<int>::max() &&
+        static_cast<double>(best) > ratio * static_cast<double>(second)) {
+      continue;
+    }
+    auto& own = owner[static_cast<std::size_t>(best_j)];
+    Correspondence c;
+    c.point_ref = ref.points[i];
+    c.pixel_curr = cf.pixels[static_cast<std::size_t>(best_j)];
+    c.depth_curr_m = cf.points[static_cast<std::size_t>(best_j)].z();
+    c.pixel_sigma_px = config_.pixel_sigma_px * static_cast<double>(cf.scale[static_cast<std::size_t>(best_j)]);
+    c.ref_index = static_cast<int>(i);
+    c.curr_index = best_j;
+    if (own.second < 0) {
+      own = {best, static_cast<int>(matches.size())};
+      matches.push_back(c);
+    } else if (best < own.first) {
+      own.first = best;
+      matches[static_cast<std::size_t>(own.second)] = c;
+    }
+  }
+}
+
+void VisualOdometry::matchByDescriptor(const FeatureSet& ref, const CurrentFrame& curr,
+                                       std::vector<Correspondence>& matches) const {
+  matches.clear();
+  const FeatureSet& cf = *curr.features;
+  if (ref.descriptors.empty() || cf.descriptors.empty() ||
+      ref.descriptors.type() != cf.descriptors.type() ||
+      ref.descriptors.cols != cf.descriptors.cols) {
+    return;
+  }
+  const DescriptorNorm norm = extractor_->norm();
+  if (norm == DescriptorNorm::kSad) {
+    // FOVIS has no global matching: search a wide window around the unmoved position instead.
+    CurrentFrame wide = curr;
+    matchGuided(ref, SE3::Identity(), wide, 4.0 * config_.search_radius_px, matches);
+    return;
+  }
+  const int max_distance =
+      norm == DescriptorNorm::kHamming ? config_.max_descriptor_distance : kSiftMaxDistance;
+  std::vector<int> ref_rows;
+  for (std::size_t i = 0; i < ref.size(); ++i) {
+    if (ref.hasDepth(i)) ref_rows.push_back(static_cast<int>(i));
+  }
+  if (ref_rows.empty()) return;
+  cv::Mat query(static_cast<int>(ref_rows.size()), ref.descriptors.cols, ref.descriptors.type());
+  for (std::size_t k = 0; k < ref_rows.size(); ++k) {
+    ref.descriptors.row(ref_rows[k]).copyTo(query.row(static_cast<int>(k)));
+  }
+  cv::BFMatcher matcher(norm == DescriptorNorm::kHamming ? cv::NORM_HAMMING : cv::NORM_L2);
+  std::vector<std::vector<cv::DMatch>> knn;
+  matcher.knnMatch(query, cf.descriptors, knn, 2);
+  std::vector<std::pair<float, int>> owner(cf.size(), {std::numeric_limits<float>::max(), -1});
+  for (const auto& pair : knn) {
+    if (pair.empty()) continue;
+    const cv::DMatch& m = pair[0];
+    if (m.distance > static_cast<float>(max_distance)) continue;
+    if (pair.size() > 1 &&
+        m.distance > static_cast<float>(config_.match_ratio) * pair[1].distance) {
+      continue;
+    }
+    const std::size_t i = static_cast<std::size_t>(ref_rows[static_cast<std::size_t>(m.queryIdx)]);
+    const std::size_t j = static_cast<std::size_t>(m.trainIdx);
+    Correspondence c;
+    c.point_ref = ref.points[i];
+    c.pixel_curr = cf.pixels[j];
+    c.depth_curr_m = cf.points[j].z();
+    c.pixel_sigma_px = config_.pixel_sigma_px * static_cast<double>(cf.scale[j]);
+    c.ref_index = static_cast<int>(i);
+    c.curr_index = static_cast<int>(j);
+    auto& own = owner[j];
+    if (own.second < 0) {
+      own = {m.distance, static_cast<int>(matches.size())};
+      matches.push_back(c);
+    } else if (m.distance < own.first) {
+      own.first = m.distance;
+      matches[static_cast<std::size_t>(own.second)] = c;
+    }
+  }
+}
+
+VisualOdometry::TrackAttempt VisualOdometry::track(const FeatureSet& ref,
+                                                   const SE3& T_ref_curr_prior, bool have_prior,
+                                                   const CurrentFrame& curr) {
+  TrackAttempt a;
+  const CameraIntrinsics& K = curr.K;
+  std::int64_t t0 = steadyNowNs();
+  std::vector<Correspondence> matches;
+  if (have_prior) {
+    matchGuided(ref, T_ref_curr_prior, curr, config_.search_radius_px, matches);
+    a.guided = true;
+  }
+  if (static_cast<int>(matches.size()) < config_.min_guided_matches) {
+    std::vector<Correspondence> global;
+    matchByDescriptor(ref, curr, global);
+    if (global.size() > matches.size()) {
+      matches.swap(global);
+      a.guided = false;
+    }
+  }
+  a.num_matches = static_cast<int>(matches.size());
+  a.time_matching_ms = msSince(t0);
+  t0 = steadyNowNs();
+  if (a.num_matches < config_.min_inliers) {
+    a.status = OdometryStatus::kInsufficientInliers;
+    a.time_motion_ms = msSince(t0);
+    return a;
+  }
+
+  // Inlier detection and an initial closed-form estimate.
+  std::vector<std::uint8_t> inliers(matches.size(), 0);
+  SE3 T = SE3::Identity();
+  int num_inliers = 0;
+  if (config_.frontend == FrontEndType::kFovis) {
+    const std::vector<int> clique = maximumConsistentClique(
+        matches, K, config_.fovis_clique_tolerance_m, config_.depth_sigma_coeff);
+    std::vector<Eigen::Vector3d> pa, pb;
+    for (int i : clique) {
+      inliers[static_cast<std::size_t>(i)] = 1;
+      pa.push_back(matches[static_cast<std::size_t>(i)].point_ref);
+      pb.push_back(matches[static_cast<std::size_t>(i)].pointCurr(K));
+    }
+    num_inliers = static_cast<int>(clique.size());
+    if (num_inliers < config_.min_inliers || !rigidFit(pa, pb, T)) {
+      a.status = OdometryStatus::kInsufficientInliers;
+      a.time_motion_ms = msSince(t0);
+      return a;
+    }
+  } else {
+    RansacResult ransac =
+        ransacRigid(matches, K, config_.inlier_threshold_px, config_.ransac_iterations, rng_);
+    if (!ransac.success || ransac.num_inliers < config_.min_inliers) {
+      a.status = OdometryStatus::kInsufficientInliers;
+      a.time_motion_ms = msSince(t0);
+      return a;
+    }
+    T = ransac.T_ref_curr;
+    inliers = ransac.inliers;
+    num_inliers = ransac.num_inliers;
+  }
+
+  RefinementOptions options;
+  options.max_iterations = config_.max_iterations;
+  options.huber_k = config_.huber_k;
+  options.depth_sigma_coeff = config_.depth_sigma_coeff;
+  auto recheck = [&](const SE3& T_est) {
+    num_inliers = 0;
+    for (std::size_t i = 0; i < matches.size(); ++i) {
+      const bool in = reprojectionErrorPx(matches[i], K, T_est) <
+                      config_.inlier_threshold_px * matches[i].pixel_sigma_px;
+      inliers[i] = in ? 1 : 0;
+      num_inliers += in ? 1 : 0;
+    }
+  };
+  RefinementResult refined = refinePose(matches, inliers, K, T, options);
+  if (!refined.success) {
+    a.status = OdometryStatus::kOptimizationFailure;
+    a.time_motion_ms = msSince(t0);
+    return a;
+  }
+  recheck(refined.T_ref_curr);
+  refined = refinePose(matches, inliers, K, refined.T_ref_curr, options);
+  if (refined.success && config_.refine_search_radius_px > 0.0) {
+    // Second, tighter guided search with the estimated motion: more (and surer) matches.
+    std::vector<Correspondence> more;
+    const std::int64_t tm = steadyNowNs();
+    matchGuided(ref, refined.T_ref_curr, curr, config_.refine_search_radius_px, more);
+    a.time_matching_ms += msSince(tm);
+    if (more.size() >= matches.size() / 2) {
+      matches.swap(more);
+      inliers.assign(matches.size(), 0);
+      a.num_matches = static_cast<int>(matches.size());
+      recheck(refined.T_ref_curr);
+      refined = refinePose(matches, inliers, K, refined.T_ref_curr, options);
+      if (refined.success) {
+        recheck(refined.T_ref_curr);
+        refined = refinePose(matches, inliers, K, refined.T_ref_curr, options);
+      }
+    }
+  }
+  a.time_motion_ms = msSince(t0);
+  if (!refined.success) {
+    a.status = OdometryStatus::kOptimizationFailure;
+    return a;
+  }
+  if (num_inliers < config_.min_inliers) {
+    a.status = OdometryStatus::kInsufficientInliers;
+    return a;
+  }
+  a.status = OdometryStatus::kOk;
+  a.T_ref_curr = refined.T_ref_curr;
+  a.covariance = refined.covariance;
+  a.num_inliers = num_inliers;
+  a.rms_px = refined.rms_reprojection_px;
+  return a;
+}
+
+SE3 VisualOdometry::alignRotation(const cv::Mat& small_curr, const CameraIntrinsics& K_full) const {
+  // FOVIS's initial rotation: minimise the photometric error between the blurred 80x60 images of
+  // the previous and current frames over a pure rotation R_prev_curr (pixels warp by K R K^-1).
+  SE3 T = SE3::Identity();
+  if (have_velocity_) T.linear() = velocity_prev_curr_.linear();
+  if (prev_small_.empty() || prev_small_.size() != small_curr.size()) return T;
+  const CameraIntrinsics K = K_full.scaled(small_curr.cols, small_curr.rows);
+  cv::Mat gx, gy;
+  cv::Sobel(prev_small_, gx, CV_32F, 1, 0, 3, 1.0 / 8.0);
+  cv::Sobel(prev_small_, gy, CV_32F, 0, 1, 3, 1.0 / 8.0);
+  Eigen::Matrix3d R = T.linear();
+  auto cost = [&](const Eigen::Matrix3d& Rc, Eigen::Matrix3d* H, Eigen::Vector3d* g) {
+    double c = 0.0;
+    int n = 0;
+    if (H) H->setZero();
+    if (g) g->setZero();
+    for (int v = 2; v < small_curr.rows - 2; ++v) {
+      const float* row = small_curr.ptr<float>(v);
+      for (int u = 2; u < small_curr.cols - 2; ++u) {
+        const Eigen::Vector3d f = K.ray(u, v);
+        const Eigen::Vector3d p = Rc * f;
+        if (p.z() <= 0.1) continue;
+        const double pu = K.fx * p.x() / p.z() + K.cx;
+        const double pv = K.fy * p.y() / p.z() + K.cy;
+        if (pu < 1 || pv < 1 || pu > small_curr.cols - 2 || pv > small_curr.rows - 2) continue;
+        const double r = bilinear(prev_small_, pu, pv) - static_cast<double>(row[u]);
+        c += r * r;
+        ++n;
+        if (H) {
+          Eigen::Matrix<double, 2, 3> dw;
+          const double iz = 1.0 / p.z();
+          dw << K.fx * iz, 0, -K.fx * p.x() * iz * iz, 0, K.fy * iz, -K.fy * p.y() * iz * iz;
+          const Eigen::RowVector2d grad(bilinear(gx, pu, pv), bilinear(gy, pu, pv));
+          const Eigen::RowVector3d J = grad * dw * (-Rc * skew(f));
+          *H += J.transpose() * J;
+          *g += J.transpose() * r;
+        }
+      }
+    }
+    return n > 100 ? c / n : std::numeric_limits<double>::infinity();
+  };
+  Eigen::Matrix3d H;
+  Eigen::Vector3d g;
+  double c = cost(R, &H, &g);
+  double lambda = 1e-3;
+  for (int it = 0; it < 8 && std::isfinite(c); ++it) {
+    Eigen::Matrix3d A = H;
+    A.diagonal() *= 1.0 + lambda;
+    const Eigen::Vector3d step = A.ldlt().solve(-g);
+    if (!step.allFinite()) break;
+    const Eigen::Matrix3d R_new = R * expSO3(step);
+    Eigen::Matrix3d H_new;
+    Eigen::Vector3d g_new;
+    const double c_new = cost(R_new, &H_new, &g_new);
+    if (c_new < c) {
+      R = R_new;
+      H = H_new;
+      g = g_new;
+      c = c_new;
+      lambda *= 0.1;
+      if (step.norm() < 1e-5) break;
+    } else {
+      lambda *= 10.0;
+    }
+  }
+  T.linear() = R;
+  return T;
+}
+
+KeyframePtr VisualOdometry::makeKeyframe(const CurrentFrame& curr, const RgbdFrame& frame,
+                                         const RgbdFramePtr& frame_ptr,
+                                         const SE3& T_world_camera) {
+  auto kf = std::make_shared<Keyframe>();
+  kf->id = next_keyframe_id_++;
+  kf->segment = segment_;
+  kf->utime = frame.utime;
+  kf->frame_sequence = frame.sequence;
+  kf->T_world_camera = T_world_camera;
+  kf->intrinsics = curr.K;
+  kf->features = *curr.features;
+  kf->frame = frame_ptr;
+  return kf;
+}
+
+OdometryResult VisualOdometry::process(const RgbdFrame& frame, const RgbdFramePtr& frame_ptr) {
+  const std::int64_t t_start = steadyNowNs();
+  OdometryResult res;
+  res.utime = frame.utime;
+  res.sequence = frame.sequence;
+  res.prev_utime = prev_utime_;
+
+  // Failure path: constant-velocity prediction for a short gap, then LOST.
+  auto fail = [&](OdometryStatus status, std::shared_ptr<FeatureSet> features) {
+    res.status = status;
+    res.segment = segment_;
+    if (state_ == TrackingState::kNotInitialized) {
+      res.tracking_state = TrackingState::kNotInitialized;
+      res.T_world_camera = T_world_prev_;
+      res.covariance = Matrix6d::Identity() * kLostCovariance;
+    } else if (state_ != TrackingState::kLost &&
+               failed_frames_ < config_.max_predicted_frames) {
+      ++failed_frames_;
+      const SE3 motion = have_velocity_ ? velocity_prev_curr_ : SE3::Identity();
+      res.T_prev_curr = motion;
+      res.T_world_camera = normalizedSE3(T_world_prev_ * motion);
+      const double s = config_.failure_sigma_scale;
+      res.covariance = last_covariance_ * (s * s);
+      state_ = TrackingState::kPredicted;
+      res.tracking_state = state_;
+    } else {
+      // LOST: hold the last pose; the next trackable frame starts a new segment there.
+      state_ = TrackingState::kLost;
+      res.tracking_state = state_;
+      res.T_world_camera = T_world_prev_;
+      res.covariance = Matrix6d::Identity() * kLostCovariance;
+      keyframe_.reset();
+      have_velocity_ = false;
+    }
+    res.covariance_ref_curr = res.covariance;
+    res.T_ref_curr = res.T_prev_curr;
+    res.ref_utime = prev_utime_;
+    T_world_prev_ = res.T_world_camera;
+    prev_utime_ = frame.utime;
+    prev_features_ = std::move(features);
+    prev_tracked_ = false;
+    res.stats.time_total_ms = msSince(t_start);
+    return res;
+  };
+
+  // Validate the input: never throw, report a status.
+  cv::Mat gray;
+  if (!frame.gray.empty() && frame.gray.type() == CV_8UC1) {
+    gray = frame.gray;
+  } else if (!frame.color_bgr.empty() && frame.color_bgr.type() == CV_8UC3) {
+    cv::cvtColor(frame.color_bgr, gray, cv::COLOR_BGR2GRAY);
+  }
+  CameraIntrinsics K = frame.intrinsics;
+  if (gray.empty() || !K.validationError().empty() || gray.cols != K.width ||
+      gray.rows != K.height || gray.cols < 32 || gray.rows < 32) {
+    return fail(OdometryStatus::kInsufficientFeatures, nullptr);
+  }
+  if (frame.depth_m.empty() || frame.depth_m.type() != CV_32FC1 ||
+      frame.depth_m.size() != gray.size()) {
+    return fail(OdometryStatus::kNoDepth, nullptr);
+  }
+
+  // Features.
+  std::int64_t t0 = steadyNowNs();
+  CurrentFrame curr;
+  curr.K = K;
+  curr.features = std::make_shared<FeatureSet>();
+  try {
+    extractor_->extract(gray, *curr.features);
+  } catch (const cv::Exception&) {
+    *curr.features = FeatureSet();
+  }
+  attachGeometry(frame.depth_m, K, config_, *curr.features);
+  curr.buildGrid();
+  cv::Mat small;
+  if (config_.frontend == FrontEndType::kFovis) {
+    cv::Mat tmp = gray;
+    while (tmp.cols > 100) {
+      cv::Mat down;
+      cv::pyrDown(tmp, down);
+      tmp = down;
+    }
+    tmp.convertTo(small, CV_32F);
+    cv::GaussianBlur(small, small, cv::Size(3, 3), 0.0);
+  }
+  res.stats.time_features_ms = msSince(t0);
+  res.stats.num_features = static_cast<int>(curr.features->size());
+  res.stats.num_features_with_depth = curr.features->num_with_depth;
+  if (curr.features->num_with_depth < config_.min_features) {
+    const bool no_depth = curr.features->size() >= static_cast<std::size_t>(config_.min_features);
+    prev_small_ = small;
+    return fail(no_depth ? OdometryStatus::kNoDepth : OdometryStatus::kInsufficientFeatures,
+                curr.features);
+  }
+
+  // First frame, or first after LOST: a new keyframe (and segment) at the last pose.
+  if (!keyframe_) {
+    if (state_ == TrackingState::kLost) ++segment_;
+    const SE3 T_world_curr = T_world_prev_;
+    keyframe_ = makeKeyframe(curr, frame, frame_ptr, T_world_curr);
+    res.status = OdometryStatus::kOk;
+    res.tracking_state = TrackingState::kOk;
+    res.T_world_camera = T_world_curr;
+    res.covariance = Matrix6d::Identity() * (state_ == TrackingState::kNotInitialized ? 0.0 : kLostCovariance);
+    res.covariance_ref_curr = res.covariance;
+    res.ref_utime = frame.utime;
+    res.reference_keyframe_id = keyframe_->id;
+    res.is_keyframe = true;
+    res.keyframe = keyframe_;
+    res.segment = segment_;
+    state_ = TrackingState::kOk;
+    failed_frames_ = 0;
+    have_velocity_ = false;
+    T_world_prev_ = T_world_curr;
+    prev_utime_ = frame.utime;
+    prev_features_ = curr.features;
+    prev_tracked_ = true;
+    prev_small_ = small;
+    res.stats.time_total_ms = msSince(t_start);
+    return res;
+  }
+
+  // Motion prior: constant velocity (FOVIS: rotation from image alignment).
+  SE3 motion_prior = have_velocity_ ? velocity_prev_curr_ : SE3::Identity();
+  if (config_.frontend == FrontEndType::kFovis) {
+    const SE3 rotation = alignRotation(small, K);
+    motion_prior.linear() = rotation.linear();
+  }
+  prev_small_ = small;
+  const SE3 T_world_pred = T_world_prev_ * motion_prior;
+
+  TrackAttempt attempt =
+      track(keyframe_->features, keyframe_->T_world_camera.inverse() * T_world_pred, true, curr);
+  SE3 T_world_ref = keyframe_->T_world_camera;
+  Utime ref_utime = keyframe_->utime;
+  std::int64_t ref_id = keyframe_->id;
+  bool from_previous = false;
+  if (attempt.status != OdometryStatus::kOk && prev_features_ && prev_tracked_ &&
+      prev_utime_ != keyframe_->utime) {
+    TrackAttempt fallback =
+        track(*prev_features_, T_world_prev_.inverse() * T_world_pred, true, curr);
+    fallback.time_matching_ms += attempt.time_matching_ms;
+    fallback.time_motion_ms += attempt.time_motion_ms;
+    if (fallback.status == OdometryStatus::kOk) {
+      attempt = fallback;
+      T_world_ref = T_world_prev_;
+      ref_utime = prev_utime_;
+      ref_id = -1;
+      from_previous = true;
+    }
+  }
+  res.stats.num_matches = attempt.num_matches;
+  res.stats.num_inliers = attempt.num_inliers;
+  res.stats.reprojection_error_px = attempt.rms_px;
+  res.stats.used_guided_matching = attempt.guided;
+  res.stats.used_previous_frame = from_previous;
+  res.stats.time_matching_ms = attempt.time_matching_ms;
+  res.stats.time_motion_ms = attempt.time_motion_ms;
+  if (attempt.status != OdometryStatus::kOk) return fail(attempt.status, curr.features);
+
+  const SE3 T_world_curr = normalizedSE3(T_world_ref * attempt.T_ref_curr);
+  res.status = OdometryStatus::kOk;
+  res.tracking_state = TrackingState::kOk;
+  res.T_world_camera = T_world_curr;
+  res.T_prev_curr = normalizedSE3(T_world_prev_.inverse() * T_world_curr);
+  res.T_ref_curr = attempt.T_ref_curr;
+  res.covariance_ref_curr = attempt.covariance;
+  res.covariance = attempt.covariance;
+  res.ref_utime = ref_utime;
+  res.reference_keyframe_id = ref_id;
+
+  // Keyframe decision.
+  bool new_keyframe = from_previous;
+  if (!new_keyframe) {
+    const double overlap = static_cast<double>(attempt.num_inliers) /
+                           std::max(1, keyframe_->features.num_with_depth);
+    const double translation_m = attempt.T_ref_curr.translation().norm();
+    const double rotation_deg = rotationAngleRad(attempt.T_ref_curr.linear()) * 180.0 / M_PI;
+    new_keyframe = attempt.num_inliers < config_.keyframe_min_inliers ||
+                   overlap < config_.keyframe_min_overlap ||
+                   translation_m > config_.keyframe_max_translation_m ||
+                   rotation_deg > config_.keyframe_max_rotation_deg;
+  }
+  if (new_keyframe) {
+    keyframe_ = makeKeyframe(curr, frame, frame_ptr, T_world_curr);
+    res.is_keyframe = true;
+    res.keyframe = keyframe_;
+  }
+  res.segment = segment_;
+  velocity_prev_curr_ = res.T_prev_curr;
+  have_velocity_ = true;
+  last_covariance_ = attempt.covariance;
+  failed_frames_ = 0;
+  state_ = TrackingState::kOk;
+  T_world_prev_ = T_world_curr;
+  prev_utime_ = frame.utime;
+  prev_features_ = curr.features;
+  prev_tracked_ = true;
+  res.stats.time_total_ms = msSince(t_start);
+  return res;
+}
+
+}  // namespace slamd
