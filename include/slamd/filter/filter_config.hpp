@@ -1,0 +1,118 @@
+#pragma once
+// Configuration of the filter area (the `filter.*` keys): the vanishing-point detector
+// (`filter.vp.*`) and the pose EKF. Every option below lists its type, default, allowed range and
+// unit; load() throws ConfigError naming the key when a value is out of range or of the wrong type.
+
+#include <string>
+
+#include "slamd/common/config.hpp"
+
+namespace slamd {
+
+/// Vanishing-point detector options, keys `filter.vp.*`.
+struct VanishingPointConfig {
+  /// `segment_detector` (choice hough|lsd, default hough): probabilistic Hough on Canny edges
+  /// (paper 002) or OpenCV's line segment detector.
+  std::string segment_detector = "hough";
+  /// `blur_kernel_px` (int, default 5, 0..15, pixels): Gaussian blur before Canny; 0 or 1 = none,
+  /// even values are rounded up to the next odd size.
+  int blur_kernel_px = 5;
+  /// `canny_low`, `canny_high` (double, defaults 40 / 120, 1..1000, grey levels): Canny hysteresis
+  /// thresholds; canny_low must not exceed canny_high.
+  double canny_low = 40.0;
+  double canny_high = 120.0;
+  /// `canny_aperture` (int, default 3, one of 3, 5, 7): Sobel aperture of Canny.
+  int canny_aperture = 3;
+  /// `hough_rho_px` (double, default 1, 0.1..10, pixels): distance resolution of the Hough space.
+  double hough_rho_px = 1.0;
+  /// `hough_theta_deg` (double, default 1, 0.1..10, degrees): angle resolution of the Hough space.
+  double hough_theta_deg = 1.0;
+  /// `hough_threshold` (int, default 40, 1..1000, votes): accumulator threshold.
+  int hough_threshold = 40;
+  /// `min_line_length_px` (double, default 30, 2..2000, pixels): shorter segments are dropped.
+  double min_line_length_px = 30.0;
+  /// `max_line_gap_px` (double, default 5, 0..100, pixels): gap bridged inside one Hough segment.
+  double max_line_gap_px = 5.0;
+  /// `max_segments` (int, default 150, 2..5000): only the longest segments are kept.
+  int max_segments = 150;
+  /// `reject_axis_parallel` (bool, default true): drop segments nearly parallel to the image axes
+  /// (paper 002: door frames and cross-corridor edges do not meet at the corridor's point).
+  bool reject_axis_parallel = true;
+  /// `axis_parallel_angle_deg` (double, default 5, 0..45, degrees): "nearly parallel" tolerance.
+  double axis_parallel_angle_deg = 5.0;
+  /// `ransac_iterations` (int, default 300, 1..100000): random line pairs tried; all pairs are
+  /// tried instead when there are fewer.
+  int ransac_iterations = 300;
+  /// `inlier_angle_deg` (double, default 1.5, 0.05..20, degrees): a segment supports a candidate
+  /// point when the angle between the segment and the ray from its midpoint to the point is below.
+  double inlier_angle_deg = 1.5;
+  /// `min_supporting_lines` (int, default 5, 2..1000): fewer inliers = no vanishing point.
+  int min_supporting_lines = 5;
+  /// `refine_iterations` (int, default 3, 1..20): least-squares refinements (inliers re-chosen
+  /// around each refined point).
+  int refine_iterations = 3;
+  /// `max_outside_fraction` (double, default 0.5, 0..100, fraction of the image size): a point
+  /// more than this fraction of the width (height) outside the image is rejected as too far.
+  double max_outside_fraction = 0.5;
+  /// `min_pixel_sigma_px` (double, default 0.5, 0.01..100, pixels): floor added (squared) to both
+  /// axes of the residual covariance, so few near-perfect lines never claim sub-floor accuracy.
+  double min_pixel_sigma_px = 0.5;
+  /// `seed` (int, default 42, 0..2^31-1): RANSAC random seed (results are reproducible per image).
+  int seed = 42;
+
+  /// Reads `<prefix>.*` (default prefix "filter.vp"); throws ConfigError.
+  static VanishingPointConfig load(Config& config, const std::string& prefix = "filter.vp");
+};
+
+/// Pose EKF and filter-stage options, keys `filter.*`.
+struct FilterConfig {
+  /// `enabled` (bool, default true): false passes odometry through (poses chained, no EKF).
+  bool enabled = true;
+  /// `vanishing_points` (bool, default true): detect vanishing points and use them as updates.
+  bool vanishing_points = true;
+  /// `translation_noise_m_per_sqrt_s` (double, default 0.002, 0..10, m/sqrt(s)): process noise
+  /// added to each prediction on top of the odometry covariance, variance = sigma^2 * dt.
+  double translation_noise_m_per_sqrt_s = 0.002;
+  /// `rotation_noise_rad_per_sqrt_s` (double, default 0.001, 0..10, rad/sqrt(s)): as above for
+  /// the rotation (camera frame, right perturbation).
+  double rotation_noise_rad_per_sqrt_s = 0.001;
+  /// `odometry_covariance_scale` (double, default 1, 0.01..1e4): multiplies each odometry
+  /// covariance (odometry front ends are often over-confident).
+  double odometry_covariance_scale = 1.0;
+  /// `fallback_translation_sigma_m` (double, default 0.05, 1e-6..10, m) and
+  /// `fallback_rotation_sigma_rad` (double, default 0.02, 1e-6..3, rad): covariance used for an
+  /// odometry increment whose own covariance is NaN or not positive semi-definite (counted).
+  double fallback_translation_sigma_m = 0.05;
+  double fallback_rotation_sigma_rad = 0.02;
+  /// `gate_chi2` (double, default 5.99, 0.1..1000, dimensionless): Mahalanobis gate on the
+  /// 2-DoF vanishing-point innovation (5.99 = 95% of chi-square with 2 DoF).
+  double gate_chi2 = 5.99;
+  /// `measurement_noise_scale` (double, default 1, 0.01..1e4): multiplies each vanishing-point
+  /// pixel covariance before it is used.
+  double measurement_noise_scale = 1.0;
+  /// `landmark_init_frames` (int, default 3, 1..100): consecutive unassociated detections of the
+  /// same world direction needed before a new landmark is created.
+  int landmark_init_frames = 3;
+  /// `landmark_init_angle_deg` (double, default 2, 0.01..45, degrees): world directions closer than
+  /// this count as "the same" while a candidate landmark is being confirmed.
+  double landmark_init_angle_deg = 2.0;
+  /// `landmark_min_separation_deg` (double, default 20, 0..90, degrees): a candidate closer than
+  /// this to an existing landmark's axis is never created (a gated detection of a known direction).
+  double landmark_min_separation_deg = 20.0;
+  /// `max_landmarks` (int, default 3, 0..32): vanishing-direction landmarks kept in the state.
+  int max_landmarks = 3;
+  /// `initial_translation_sigma_m` (double, default 1e-6, 0..100, m) and
+  /// `initial_rotation_sigma_rad` (double, default 1e-6, 0..10, rad): initial pose uncertainty
+  /// (the world frame is the first camera frame).
+  double initial_translation_sigma_m = 1e-6;
+  double initial_rotation_sigma_rad = 1e-6;
+  /// `max_dt_s` (double, default 5, 0.001..3600, s): dt used for process noise is clamped here.
+  double max_dt_s = 5.0;
+
+  VanishingPointConfig vp;
+
+  /// Reads `filter.*` and `filter.vp.*`; throws ConfigError.
+  static FilterConfig load(Config& config);
+};
+
+}  // namespace slamd

@@ -1,0 +1,221 @@
+#pragma once
+// PoseEkf: an error-state EKF over the camera pose and world-frame vanishing directions, driven by
+// odometry increments and corrected by vanishing points (paper 002, done with a point at infinity).
+//
+// Usage (one instance, owned by the filter thread; no threads inside, not thread-safe):
+//   PoseEkf ekf(config, intrinsics);                    // pose = identity: world = first camera
+//   for each odometry increment:
+//     ekf.predict(T_prev_curr, covariance_prev_curr, dt_s);
+//     if (a vanishing point was detected in the current image)
+//       VpUpdateResult r = ekf.updateVanishingPoint(vp.pixel, vp.pixel_covariance);
+//   ekf.T_world_camera(), ekf.poseCovariance()          // filtered pose, 6x6
+//
+// State. Nominal: T_world_camera (rotation R = R_world_camera, translation t = camera origin in
+// world, metres) and L unit vectors d_world[i] (vanishing-direction landmarks, world frame; an
+// axis: d and -d give the same vanishing point). Error state, dimension 6 + 2L, in slamd's
+// covariance convention (the same as PoseEstimate and odometry_t):
+//   t_true = t + dt                  dt: 3, metres, world frame
+//   R_true = R * expSO3(dtheta)      dtheta: 3, radians, right (camera-frame) perturbation
+//   d_true = normalise(d + B(d) dl)  dl: 2, tangent plane of d, B(d) a fixed orthonormal basis
+// No Euler angles anywhere. After each update the error is injected into the nominal state and the
+// covariance is transported to the new linearisation point (right Jacobian of SO(3) for the
+// rotation, the change of tangent basis for each landmark).
+//
+// Prediction. T_world_curr = T_world_prev * T_prev_curr, with odometry noise in odometry_t's
+// convention (translation additive in the previous camera frame, rotation right-perturbed in the
+// current frame). Error propagation:
+//   dt'     = dt - R [t_pc]x dtheta + R n_t
+//   dtheta' = R_pc^T dtheta + n_phi
+// plus process noise diag(sigma_t^2 dt, sigma_r^2 dt). Landmarks are static.
+//
+// Measurement (point at infinity). A world direction d seen from a camera with rotation R projects
+// to the vanishing point
+//   h(x) = pi(K R^T d),   pi([x y z]) = [x/z, y/z]   (pixels, independent of the translation),
+// with Jacobians, for d_c = R^T d and J_pi = [fx/z 0 -fx x/z^2; 0 fy/z -fy y/z^2]:
+//   dh/ddtheta = J_pi [d_c]x,   dh/ddl = J_pi R^T B(d),   dh/ddt = 0.
+// How this differs from paper 002: the paper models the vanishing point as the image of a 3D point
+// placed at a large but finite distance, h = pi(K R^T (p_far - t)). That needs an arbitrary
+// distance, leaks a spurious dependence on translation (a sideways move of b metres shifts the
+// predicted point by about f b / Z pixels, which the filter then "corrects" by rotating), and keeps
+// a 3-DoF landmark whose depth is unobservable. The point at infinity is exact for parallel lines:
+// it observes only rotation (two DoF per direction: the rotation about d itself is unobservable
+// from one direction), has no translation Jacobian, and a 2-DoF landmark.
+//
+// Gating and association: every landmark whose axis projects in front of the image plane is a
+// candidate; the innovation covariance S = H P H^T + R gives the NIS nu^T S^-1 nu; the landmark
+// with the smallest NIS is chosen and the update applied when NIS <= gate_chi2 (chi-square, 2 DoF,
+// default 5.99), otherwise the measurement is gated (counted, state unchanged). A detection that no
+// landmark accepts becomes a candidate direction in the world; seen in landmark_init_frames
+// consecutive calls within landmark_init_angle_deg (and far from existing landmarks) it becomes a
+// new landmark, initialised with the covariance of R * K^-1 u (correlated with the pose).
+// Covariance updates use the Joseph form (I - KH) P (I - KH)^T + K R K^T.
+//
+// Bad input (non-finite motion or pixel, NaN or non-positive-(semi)definite covariances) never
+// throws: it is rejected or replaced by a documented fallback, reported by the status and counted.
+
+#include <cstdint>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "slamd/common/camera_intrinsics.hpp"
+#include "slamd/common/se3.hpp"
+#include "slamd/filter/filter_config.hpp"
+
+namespace slamd {
+
+enum class EkfPredictStatus : std::int8_t {
+  kOk = 0,
+  kFallbackCovariance,  ///< odometry covariance NaN or not PSD: fallback covariance used
+  kRejected,            ///< non-finite or non-rigid motion: state unchanged
+};
+
+enum class VpUpdateStatus : std::int8_t {
+  kAccepted = 0,    ///< associated with a landmark, passed the gate, state updated
+  kGated,           ///< best landmark's NIS above the gate: state unchanged
+  kNewLandmark,     ///< confirmed candidate: a landmark was created from this detection
+  kCandidate,       ///< no landmark accepted it; counted towards a new landmark
+  kBadMeasurement,  ///< non-finite pixel, or covariance NaN / not positive definite
+  kUnknownLandmark, ///< updateLandmark() with an id that does not exist
+  kNotVisible,      ///< the landmark's vanishing point is at infinity in the image
+};
+
+const char* ekfPredictStatusName(EkfPredictStatus status);
+const char* vpUpdateStatusName(VpUpdateStatus status);
+
+/// What one vanishing-point update did (fields of slamd.vanishing_point_t and of the status
+/// channel).
+struct VpUpdateResult {
+  VpUpdateStatus status = VpUpdateStatus::kBadMeasurement;
+  bool accepted = false;  ///< true for kAccepted only
+  int landmark_id = -1;   ///< associated (or best, when gated; or created) landmark, -1 none
+  Eigen::Vector2d measured_px = Eigen::Vector2d::Zero();
+  Eigen::Vector2d predicted_px = Eigen::Vector2d::Zero();  ///< h(x) before the update
+  Eigen::Vector2d innovation_px = Eigen::Vector2d::Zero();
+  Eigen::Matrix2d innovation_covariance = Eigen::Matrix2d::Zero();  ///< S, pixels^2
+  double nis = 0.0;  ///< Mahalanobis distance squared nu^T S^-1 nu (2 DoF); 0 when none
+};
+
+/// A vanishing-direction landmark.
+struct DirectionLandmark {
+  int id = 0;
+  Eigen::Vector3d d_world = Eigen::Vector3d::UnitZ();  ///< unit axis, world frame
+  std::int64_t num_updates = 0;
+};
+
+struct EkfCounters {
+  std::int64_t predictions = 0;
+  std::int64_t predictions_rejected = 0;
+  std::int64_t fallback_covariances = 0;
+  std::int64_t bad_dt = 0;  ///< negative or non-finite dt (treated as 0)
+  std::int64_t updates_accepted = 0;
+  std::int64_t updates_gated = 0;
+  std::int64_t bad_measurements = 0;
+  std::int64_t landmarks_created = 0;
+};
+
+class PoseEkf {
+ public:
+  PoseEkf(const FilterConfig& config, const CameraIntrinsics& intrinsics);
+
+  /// Restarts at T_world_camera with a 6x6 pose covariance (slamd convention) and no landmarks.
+  void reset(const SE3& T_world_camera, const Matrix6d& pose_covariance);
+
+  /// Propagates by one odometry increment.
+  /// @param T_prev_curr current camera frame -> previous camera frame (metres)
+  /// @param covariance_prev_curr 6x6, x y z (m^2, previous camera frame), rx ry rz (rad^2, right
+  ///        perturbation in the current camera frame), as in slamd.odometry_t
+  /// @param dt_s time between the two frames, seconds (for the process noise)
+  EkfPredictStatus predict(const SE3& T_prev_curr, const Matrix6d& covariance_prev_curr,
+                           double dt_s);
+
+  /// Associates a vanishing point with the landmarks, gates and updates (or counts it towards a
+  /// new landmark).
+  /// @param pixel vanishing point, pixels; @param pixel_covariance 2x2, pixels^2
+  VpUpdateResult updateVanishingPoint(const Eigen::Vector2d& pixel,
+                                      const Eigen::Matrix2d& pixel_covariance);
+
+  /// Update against one given landmark (known association), with the same gate.
+  VpUpdateResult updateLandmark(int landmark_id, const Eigen::Vector2d& pixel,
+                                const Eigen::Matrix2d& pixel_covariance);
+
+  /// Adds a landmark from a vanishing point seen now (no confirmation); returns its id, or -1 when
+  /// the input is bad or max_landmarks is reached.
+  int addLandmark(const Eigen::Vector2d& pixel, const Eigen::Matrix2d& pixel_covariance);
+
+  // --- corrections from a back end -------------------------------------------------------------
+  /// Replaces the pose and its 6x6 covariance; landmarks are kept, pose-landmark correlations
+  /// are dropped.
+  void setPose(const SE3& T_world_camera, const Matrix6d& pose_covariance);
+  /// Moves the whole map by T_corrected_world (world -> corrected world): the pose becomes
+  /// T_corrected_world * T_world_camera and landmark directions rotate with it; covariances are
+  /// transformed accordingly (the correction itself is treated as exact).
+  void applyCorrection(const SE3& T_corrected_world);
+
+  // --- outputs ---------------------------------------------------------------------------------
+  const SE3& T_world_camera() const { return T_world_camera_; }
+  /// Pose covariance, slamd convention (translation m^2 world frame, rotation rad^2 camera frame).
+  Matrix6d poseCovariance() const { return P_.topLeftCorner<6, 6>(); }
+  /// Full error-state covariance, (6 + 2L) square.
+  const Eigen::MatrixXd& covariance() const { return P_; }
+  const std::vector<DirectionLandmark>& landmarks() const { return landmarks_; }
+  const EkfCounters& counters() const { return counters_; }
+  const FilterConfig& config() const { return config_; }
+
+  // --- models, public for tests (Jacobians are checked against central differences) -----------
+  /// T boxplus delta: translation + delta[0:3] (world), rotation * expSO3(delta[3:6]).
+  static SE3 boxplus(const SE3& T, const Vector6d& delta);
+  /// a boxminus b: the delta with boxplus(b, delta) = a.
+  static Vector6d boxminus(const SE3& a, const SE3& b);
+  /// Error-propagation Jacobians of T_world_curr = T_world_prev * T_prev_curr: F with respect to
+  /// the pose error, G with respect to the odometry noise.
+  static void motionJacobians(const SE3& T_world_prev, const SE3& T_prev_curr, Matrix6d* F,
+                              Matrix6d* G);
+  /// Orthonormal basis (3x2) of the plane perpendicular to the unit vector d.
+  static Eigen::Matrix<double, 3, 2> tangentBasis(const Eigen::Vector3d& d);
+  /// normalise(d + B(d) delta).
+  static Eigen::Vector3d retractDirection(const Eigen::Vector3d& d, const Eigen::Vector2d& delta);
+  /// h = pi(K R^T d) and its Jacobians with respect to the rotation error (2x3) and the landmark
+  /// tangent error (2x2). False when R^T d is (nearly) parallel to the image plane.
+  static bool projectDirection(const CameraIntrinsics& K, const Eigen::Matrix3d& R_world_camera,
+                               const Eigen::Vector3d& d_world, Eigen::Vector2d* pixel,
+                               Eigen::Matrix<double, 2, 3>* H_rotation,
+                               Eigen::Matrix2d* H_direction);
+  /// World direction of a vanishing pixel, d = R K^-1 [u 1] / |.|, and the Jacobians of its
+  /// tangent error (in B(d)) with respect to the rotation error (2x3) and the pixel (2x2).
+  static Eigen::Vector3d directionFromPixel(const CameraIntrinsics& K,
+                                            const Eigen::Matrix3d& R_world_camera,
+                                            const Eigen::Vector2d& pixel,
+                                            Eigen::Matrix<double, 2, 3>* J_rotation,
+                                            Eigen::Matrix2d* J_pixel);
+
+ private:
+  struct Candidate {
+    Eigen::Vector3d d_world;
+    int count = 0;
+    std::int64_t last_call = 0;
+  };
+
+  /// NIS and pieces for landmark index i; false when not visible.
+  bool innovation(std::size_t index, const Eigen::Vector2d& pixel, const Eigen::Matrix2d& R_px,
+                  VpUpdateResult* result, Eigen::MatrixXd* H) const;
+  void applyUpdate(const Eigen::MatrixXd& H, const Eigen::Vector2d& innovation,
+                   const Eigen::Matrix2d& S, const Eigen::Matrix2d& R_px);
+  void acceptUpdate(std::size_t index, const Eigen::MatrixXd& H, const Eigen::Matrix2d& R_px,
+                    VpUpdateResult* result);
+  int addLandmarkUnchecked(const Eigen::Vector2d& pixel, const Eigen::Matrix2d& R_px);
+  bool validMeasurement(const Eigen::Vector2d& pixel, const Eigen::Matrix2d& covariance,
+                        Eigen::Matrix2d* R_px) const;
+
+  FilterConfig config_;
+  CameraIntrinsics intrinsics_;
+  SE3 T_world_camera_ = SE3::Identity();
+  std::vector<DirectionLandmark> landmarks_;
+  Eigen::MatrixXd P_;
+  std::vector<Candidate> candidates_;
+  std::int64_t vp_calls_ = 0;
+  int next_landmark_id_ = 0;
+  EkfCounters counters_;
+};
+
+}  // namespace slamd

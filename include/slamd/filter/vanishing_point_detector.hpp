@@ -1,0 +1,116 @@
+#pragma once
+// VanishingPointDetector: the dominant vanishing point of one grey image (paper 002, extended).
+//
+// Usage (one instance per camera, owned by the filter thread; no threads inside, not
+// thread-safe):
+//   VanishingPointDetector detector(intrinsics, VanishingPointConfig::load(config));
+//   VanishingPoint vp = detector.detect(frame.gray);
+//   if (vp.status == VanishingPointStatus::kOk) ekf.updateVanishingPoint(vp.pixel,
+//                                                                        vp.pixel_covariance);
+//
+// Steps: optional Gaussian blur, Canny edges, probabilistic Hough segments (or OpenCV's LSD on the
+// grey image), optional removal of segments nearly parallel to the image axes (paper 002), then
+// RANSAC over segment pairs: each pair's intersection is scored by the summed length of the
+// segments pointing at it (angle between the segment and the ray from its midpoint to the point
+// below `inlier_angle_deg`). The best candidate is refined by least squares on its inliers with
+// paper 002's normal equations u = (A^T A)^-1 A^T c, each segment a row a_i = unit normal,
+// c_i = a_i . p_i (p_i a point of the segment), so a_i . u - c_i is the perpendicular distance in
+// pixels from u to the segment's line; inliers are re-chosen around each refined point. The 2x2
+// covariance is sigma^2 (A^T A)^-1 with sigma^2 = sum r_i^2 / (n - 2) from the residuals, plus
+// min_pixel_sigma_px^2 on the diagonal.
+//
+// Frames and units: pixels with (0, 0) the centre of the top-left pixel; direction_camera is the
+// unit vector K^-1 [u v 1]^T / |.| in the camera optical frame (x right, y down, z forward), so it
+// always has z > 0 (a vanishing point fixes a direction only up to sign).
+//
+// Bad input (empty image, wrong type, size different from the intrinsics) returns a status and is
+// counted, never throws.
+
+#include <cstdint>
+#include <random>
+#include <vector>
+
+#include <Eigen/Core>
+#include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "slamd/common/camera_intrinsics.hpp"
+#include "slamd/filter/filter_config.hpp"
+
+namespace slamd {
+
+enum class VanishingPointStatus : std::int8_t {
+  kOk = 0,
+  kEmptyImage,      ///< no pixels
+  kWrongImageType,  ///< not CV_8UC1
+  kWrongImageSize,  ///< size differs from the intrinsics
+  kTooFewLines,     ///< fewer usable segments than min_supporting_lines
+  kNoConsensus,     ///< no candidate with min_supporting_lines inliers
+  kDegenerate,      ///< inliers (nearly) parallel: the least-squares system is singular
+  kOutsideImage,    ///< point farther outside the image than max_outside_fraction allows
+};
+
+const char* vanishingPointStatusName(VanishingPointStatus status);
+
+/// One image line segment, pixels.
+struct LineSegment {
+  Eigen::Vector2d p1_px;
+  Eigen::Vector2d p2_px;
+  double length_px() const { return (p2_px - p1_px).norm(); }
+};
+
+struct VanishingPoint {
+  VanishingPointStatus status = VanishingPointStatus::kEmptyImage;
+  /// Vanishing point, pixels (may lie outside the image).
+  Eigen::Vector2d pixel = Eigen::Vector2d::Zero();
+  /// Covariance of pixel, pixels^2.
+  Eigen::Matrix2d pixel_covariance = Eigen::Matrix2d::Identity();
+  /// Unit direction of the vanishing lines in the camera optical frame, z > 0.
+  Eigen::Vector3d direction_camera = Eigen::Vector3d::UnitZ();
+  /// Segments supporting the point (inliers of the final least-squares fit).
+  int num_supporting_lines = 0;
+  /// Segments left after length and axis-parallel filtering.
+  int num_segments = 0;
+  /// RMS perpendicular distance of the supporting lines from the point, pixels.
+  double rms_residual_px = 0.0;
+};
+
+/// Counters since construction (for the status channel).
+struct VanishingPointCounters {
+  std::int64_t images = 0;
+  std::int64_t detected = 0;
+  std::int64_t bad_input = 0;     ///< empty, wrong type or wrong size
+  std::int64_t not_detected = 0;  ///< too few lines, no consensus, degenerate, outside
+};
+
+class VanishingPointDetector {
+ public:
+  VanishingPointDetector(const CameraIntrinsics& intrinsics, const VanishingPointConfig& config);
+
+  /// Detects the dominant vanishing point of a CV_8UC1 image of the intrinsics' size.
+  VanishingPoint detect(const cv::Mat& gray);
+
+  /// The segments of the last detect() call after filtering (for debugging and drawing).
+  const std::vector<LineSegment>& segments() const { return segments_; }
+  /// Indices into segments() of the last result's supporting lines.
+  const std::vector<int>& inliers() const { return inliers_; }
+  const VanishingPointCounters& counters() const { return counters_; }
+  const VanishingPointConfig& config() const { return config_; }
+
+  /// The vanishing point of given segments (the part of detect() after line extraction); public
+  /// so that it can be tested on exact lines.
+  VanishingPoint estimateFromSegments(const std::vector<LineSegment>& segments);
+
+ private:
+  void extractSegments(const cv::Mat& gray);
+
+  CameraIntrinsics intrinsics_;
+  VanishingPointConfig config_;
+  std::vector<LineSegment> segments_;
+  std::vector<int> inliers_;
+  VanishingPointCounters counters_;
+  cv::Mat blurred_, edges_;  ///< scratch images reused between frames
+  cv::Ptr<cv::LineSegmentDetector> lsd_;  ///< only when segment_detector = lsd
+};
+
+}  // namespace slamd

@@ -1,0 +1,69 @@
+#pragma once
+// VanishingPointFilter: the filter stage's algorithm, one call per odometry increment plus an
+// optional grey image; wraps a VanishingPointDetector and a PoseEkf (paper 002's loop).
+//
+// Usage (owned by the filter thread, or called in a loop over a recorded sequence; no threads
+// inside, not thread-safe):
+//   VanishingPointFilter filter(FilterConfig::load(config), intrinsics);
+//   for each odometry increment:
+//     FilterInput in{utime, T_prev_curr, covariance, dt_s, frame.gray};  // gray may be empty
+//     FilterOutput out = filter.process(in);
+//     publish(out.pose);                              // T_world_camera + 6x6, source kFilter
+//     if (out.vanishing_point) publish(out.vanishing_point, out.update);  // vanishing_point_t
+//
+// With filter.enabled = false the increments are only chained (the pose covariance still grows
+// with each odometry covariance), so the output stays comparable; with filter.vanishing_points =
+// false images are ignored. Conventions: see PoseEkf (world = first camera frame, covariances in
+// slamd's x y z rx ry rz order, rotation a right perturbation in the camera frame).
+
+#include <cstdint>
+#include <optional>
+
+#include <opencv2/core.hpp>
+
+#include "slamd/common/camera_intrinsics.hpp"
+#include "slamd/common/pose_estimate.hpp"
+#include "slamd/filter/filter_config.hpp"
+#include "slamd/filter/pose_ekf.hpp"
+#include "slamd/filter/vanishing_point_detector.hpp"
+
+namespace slamd {
+
+struct FilterInput {
+  Utime utime = 0;  ///< capture time of the current frame
+  /// Current camera frame -> previous camera frame, metres (odometry_t's T_prev_curr).
+  SE3 T_prev_curr = SE3::Identity();
+  /// Covariance of T_prev_curr in odometry_t's convention.
+  Matrix6d covariance = Matrix6d::Identity() * 1e-6;
+  double dt_s = 0.0;  ///< seconds since the previous frame
+  cv::Mat gray;       ///< CV_8UC1 image of the current frame, or empty
+};
+
+struct FilterOutput {
+  PoseEstimate pose;  ///< filtered T_world_camera with its 6x6 covariance
+  EkfPredictStatus predict_status = EkfPredictStatus::kOk;
+  /// Set when an image was given and vanishing points are enabled (status says if one was found).
+  std::optional<VanishingPoint> vanishing_point;
+  /// Set when a vanishing point was found and handed to the EKF.
+  std::optional<VpUpdateResult> update;
+};
+
+class VanishingPointFilter {
+ public:
+  VanishingPointFilter(const FilterConfig& config, const CameraIntrinsics& intrinsics);
+
+  FilterOutput process(const FilterInput& input);
+
+  PoseEkf& ekf() { return ekf_; }
+  const PoseEkf& ekf() const { return ekf_; }
+  const VanishingPointDetector& detector() const { return detector_; }
+  std::int64_t steps() const { return steps_; }
+
+ private:
+  FilterConfig config_;
+  VanishingPointDetector detector_;
+  PoseEkf ekf_;
+  std::int64_t steps_ = 0;
+};
+
+}  // namespace slamd

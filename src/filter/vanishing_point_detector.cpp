@@ -1,0 +1,271 @@
+#include "slamd/filter/vanishing_point_detector.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+
+#include <Eigen/Dense>
+
+namespace slamd {
+
+namespace {
+
+constexpr double kDegToRad = M_PI / 180.0;
+// Two lines whose normals' cross product is below this (sine of the angle between the lines,
+// about 0.3 degrees) meet too far away for their intersection to be a useful candidate.
+constexpr double kMinIntersectionSine = 5e-3;
+
+/// A segment as a line in Hessian form: normal . x = c, |normal| = 1.
+struct LineRow {
+  Eigen::Vector2d normal;
+  double c = 0.0;
+  Eigen::Vector2d midpoint;
+  Eigen::Vector2d direction;  ///< unit
+  double length_px = 0.0;
+};
+
+LineRow makeRow(const LineSegment& s) {
+  LineRow row;
+  const Eigen::Vector2d d = s.p2_px - s.p1_px;
+  row.length_px = d.norm();
+  row.direction = d / row.length_px;
+  row.normal = Eigen::Vector2d(-row.direction.y(), row.direction.x());
+  row.midpoint = 0.5 * (s.p1_px + s.p2_px);
+  row.c = row.normal.dot(row.midpoint);
+  return row;
+}
+
+/// True when the segment points at u within the angle whose sine is max_sine.
+bool supports(const LineRow& row, const Eigen::Vector2d& u, double max_sine) {
+  const Eigen::Vector2d q = u - row.midpoint;
+  const double q_norm = q.norm();
+  if (q_norm < 1e-9) return true;
+  const double cross = row.direction.x() * q.y() - row.direction.y() * q.x();
+  return std::abs(cross) <= max_sine * q_norm;
+}
+
+}  // namespace
+
+const char* vanishingPointStatusName(VanishingPointStatus status) {
+  switch (status) {
+    case VanishingPointStatus::kOk: return "OK";
+    case VanishingPointStatus::kEmptyImage: return "EMPTY_IMAGE";
+    case VanishingPointStatus::kWrongImageType: return "WRONG_IMAGE_TYPE";
+    case VanishingPointStatus::kWrongImageSize: return "WRONG_IMAGE_SIZE";
+    case VanishingPointStatus::kTooFewLines: return "TOO_FEW_LINES";
+    case VanishingPointStatus::kNoConsensus: return "NO_CONSENSUS";
+    case VanishingPointStatus::kDegenerate: return "DEGENERATE";
+    case VanishingPointStatus::kOutsideImage: return "OUTSIDE_IMAGE";
+  }
+  return "UNKNOWN";
+}
+
+VanishingPointDetector::VanishingPointDetector(const CameraIntrinsics& intrinsics,
+                                               const VanishingPointConfig& config)
+    : intrinsics_(intrinsics), config_(config) {
+  if (config_.segment_detector == "lsd") {
+    lsd_ = cv::createLineSegmentDetector(cv::LSD_REFINE_STD);
+  }
+}
+
+void VanishingPointDetector::extractSegments(const cv::Mat& gray) {
+  std::vector<LineSegment> raw;
+  if (lsd_) {
+    std::vector<cv::Vec4f> lines;
+    lsd_->detect(gray, lines);
+    raw.reserve(lines.size());
+    for (const auto& l : lines) {
+      raw.push_back({Eigen::Vector2d(l[0], l[1]), Eigen::Vector2d(l[2], l[3])});
+    }
+  } else {
+    const cv::Mat* input = &gray;
+    if (config_.blur_kernel_px > 1) {
+      const int k = config_.blur_kernel_px | 1;  // odd
+      cv::GaussianBlur(gray, blurred_, cv::Size(k, k), 0.0);
+      input = &blurred_;
+    }
+    cv::Canny(*input, edges_, config_.canny_low, config_.canny_high, config_.canny_aperture, true);
+    std::vector<cv::Vec4i> lines;
+    cv::HoughLinesP(edges_, lines, config_.hough_rho_px, config_.hough_theta_deg * kDegToRad,
+                    config_.hough_threshold, config_.min_line_length_px, config_.max_line_gap_px);
+    raw.reserve(lines.size());
+    for (const auto& l : lines) {
+      raw.push_back({Eigen::Vector2d(l[0], l[1]), Eigen::Vector2d(l[2], l[3])});
+    }
+  }
+
+  const double axis_sine = std::sin(config_.axis_parallel_angle_deg * kDegToRad);
+  segments_.clear();
+  for (const auto& s : raw) {
+    const Eigen::Vector2d d = s.p2_px - s.p1_px;
+    const double length = d.norm();
+    if (!(length >= config_.min_line_length_px)) continue;
+    if (config_.reject_axis_parallel) {
+      // Nearly horizontal: |dy| small; nearly vertical: |dx| small.
+      if (std::abs(d.y()) <= axis_sine * length || std::abs(d.x()) <= axis_sine * length) continue;
+    }
+    segments_.push_back(s);
+  }
+  if (static_cast<int>(segments_.size()) > config_.max_segments) {
+    std::nth_element(segments_.begin(), segments_.begin() + config_.max_segments, segments_.end(),
+                     [](const LineSegment& a, const LineSegment& b) {
+                       return a.length_px() > b.length_px();
+                     });
+    segments_.resize(static_cast<std::size_t>(config_.max_segments));
+  }
+}
+
+VanishingPoint VanishingPointDetector::detect(const cv::Mat& gray) {
+  ++counters_.images;
+  VanishingPoint result;
+  segments_.clear();
+  inliers_.clear();
+  if (gray.empty()) {
+    result.status = VanishingPointStatus::kEmptyImage;
+  } else if (gray.type() != CV_8UC1) {
+    result.status = VanishingPointStatus::kWrongImageType;
+  } else if (gray.cols != intrinsics_.width || gray.rows != intrinsics_.height) {
+    result.status = VanishingPointStatus::kWrongImageSize;
+  } else {
+    extractSegments(gray);
+    return estimateFromSegments(segments_);  // counts the outcome
+  }
+  ++counters_.bad_input;
+  return result;
+}
+
+VanishingPoint VanishingPointDetector::estimateFromSegments(
+    const std::vector<LineSegment>& segments) {
+  VanishingPoint result;
+  if (&segments != &segments_) segments_ = segments;
+  inliers_.clear();
+  std::vector<LineRow> rows;
+  rows.reserve(segments.size());
+  for (const auto& s : segments) {
+    const double length = s.length_px();
+    if (std::isfinite(length) && length > 1e-6 && s.p1_px.allFinite() && s.p2_px.allFinite()) {
+      rows.push_back(makeRow(s));
+    }
+  }
+  result.num_segments = static_cast<int>(rows.size());
+  const auto fail = [&](VanishingPointStatus status) {
+    result.status = status;
+    ++counters_.not_detected;
+    return result;
+  };
+  const int n = static_cast<int>(rows.size());
+  if (n < std::max(2, config_.min_supporting_lines)) return fail(VanishingPointStatus::kTooFewLines);
+
+  const double w = intrinsics_.width, h = intrinsics_.height;
+  const double margin_x = config_.max_outside_fraction * w;
+  const double margin_y = config_.max_outside_fraction * h;
+  const auto inside_region = [&](const Eigen::Vector2d& u) {
+    return u.x() >= -margin_x && u.x() <= w - 1.0 + margin_x && u.y() >= -margin_y &&
+           u.y() <= h - 1.0 + margin_y;
+  };
+  const double max_sine = std::sin(config_.inlier_angle_deg * kDegToRad);
+
+  // RANSAC over pairs: all of them when there are few, otherwise random ones (seeded per image so
+  // a frame always gives the same answer).
+  const long long num_pairs = static_cast<long long>(n) * (n - 1) / 2;
+  std::mt19937 rng(static_cast<std::mt19937::result_type>(config_.seed));
+  std::uniform_int_distribution<int> pick(0, n - 1);
+  double best_score = -1.0;
+  Eigen::Vector2d best_u = Eigen::Vector2d::Zero();
+  bool any_candidate_outside = false;
+  const auto try_pair = [&](int i, int j) {
+    const LineRow& a = rows[static_cast<std::size_t>(i)];
+    const LineRow& b = rows[static_cast<std::size_t>(j)];
+    const double det = a.normal.x() * b.normal.y() - a.normal.y() * b.normal.x();
+    if (std::abs(det) < kMinIntersectionSine) return;
+    const Eigen::Vector2d u((a.c * b.normal.y() - b.c * a.normal.y()) / det,
+                            (a.normal.x() * b.c - b.normal.x() * a.c) / det);
+    if (!inside_region(u)) {
+      any_candidate_outside = true;
+      return;
+    }
+    double score = 0.0;
+    for (const auto& r : rows) {
+      if (supports(r, u, max_sine)) score += r.length_px;
+    }
+    if (score > best_score) {
+      best_score = score;
+      best_u = u;
+    }
+  };
+  if (num_pairs <= config_.ransac_iterations) {
+    for (int i = 0; i < n; ++i) {
+      for (int j = i + 1; j < n; ++j) try_pair(i, j);
+    }
+  } else {
+    for (int it = 0; it < config_.ransac_iterations; ++it) {
+      const int i = pick(rng);
+      const int j = pick(rng);
+      if (i != j) try_pair(i, j);
+    }
+  }
+  if (best_score < 0.0) {
+    return fail(any_candidate_outside ? VanishingPointStatus::kOutsideImage
+                                      : VanishingPointStatus::kNoConsensus);
+  }
+
+  // Least-squares refinement on the inliers: u = (A^T A)^-1 A^T c. Each pass re-chooses the
+  // inliers around the current point and accumulates the normal equations and the residuals at it.
+  std::vector<int> inliers;
+  Eigen::Matrix2d AtA;
+  Eigen::Vector2d Atc;
+  double sum_sq = 0.0;
+  const auto accumulate = [&](const Eigen::Vector2d& at) {
+    inliers.clear();
+    AtA.setZero();
+    Atc.setZero();
+    sum_sq = 0.0;
+    for (int i = 0; i < n; ++i) {
+      const LineRow& r = rows[static_cast<std::size_t>(i)];
+      if (!supports(r, at, max_sine)) continue;
+      inliers.push_back(i);
+      AtA += r.normal * r.normal.transpose();
+      Atc += r.normal * r.c;
+      const double residual = r.normal.dot(at) - r.c;
+      sum_sq += residual * residual;
+    }
+    return static_cast<int>(inliers.size()) >= config_.min_supporting_lines;
+  };
+  Eigen::Vector2d u = best_u;
+  for (int iteration = 0; iteration < config_.refine_iterations; ++iteration) {
+    if (!accumulate(u)) return fail(VanishingPointStatus::kNoConsensus);
+    // Inliers all (nearly) parallel: the smaller eigenvalue of A^T A is the sum of the squared
+    // sines of the normals' spread; below ~1e-6 per line the point is not determined.
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eig(AtA);
+    if (eig.eigenvalues()(0) < 1e-6 * static_cast<double>(inliers.size())) {
+      return fail(VanishingPointStatus::kDegenerate);
+    }
+    const Eigen::Vector2d refined = AtA.ldlt().solve(Atc);
+    if (!refined.allFinite()) return fail(VanishingPointStatus::kDegenerate);
+    const bool converged = (refined - u).norm() < 1e-3;
+    u = refined;
+    if (converged && iteration > 0) break;
+  }
+  if (!inside_region(u)) return fail(VanishingPointStatus::kOutsideImage);
+
+  // Final inliers and residual covariance at the refined point.
+  if (!accumulate(u)) return fail(VanishingPointStatus::kNoConsensus);
+  const int m = static_cast<int>(inliers.size());
+  const double sigma_sq = m > 2 ? sum_sq / (m - 2) : 0.0;
+  Eigen::Matrix2d covariance = sigma_sq * AtA.inverse();
+  covariance += config_.min_pixel_sigma_px * config_.min_pixel_sigma_px *
+                Eigen::Matrix2d::Identity();
+  if (!covariance.allFinite()) return fail(VanishingPointStatus::kDegenerate);
+
+  result.status = VanishingPointStatus::kOk;
+  result.pixel = u;
+  result.pixel_covariance = 0.5 * (covariance + covariance.transpose());
+  result.direction_camera = intrinsics_.ray(u.x(), u.y()).normalized();
+  result.num_supporting_lines = m;
+  result.rms_residual_px = std::sqrt(sum_sq / m);
+  inliers_ = inliers;
+  ++counters_.detected;
+  return result;
+}
+
+}  // namespace slamd

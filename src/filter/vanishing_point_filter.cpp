@@ -1,0 +1,30 @@
+#include "slamd/filter/vanishing_point_filter.hpp"
+
+namespace slamd {
+
+VanishingPointFilter::VanishingPointFilter(const FilterConfig& config,
+                                           const CameraIntrinsics& intrinsics)
+    : config_(config), detector_(intrinsics, config.vp), ekf_(config, intrinsics) {}
+
+FilterOutput VanishingPointFilter::process(const FilterInput& input) {
+  FilterOutput out;
+  out.predict_status = ekf_.predict(input.T_prev_curr, input.covariance, input.dt_s);
+  if (config_.enabled && config_.vanishing_points && !input.gray.empty()) {
+    out.vanishing_point = detector_.detect(input.gray);
+    if (out.vanishing_point->status == VanishingPointStatus::kOk) {
+      out.update =
+          ekf_.updateVanishingPoint(out.vanishing_point->pixel, out.vanishing_point->pixel_covariance);
+    }
+  }
+  out.pose.utime = input.utime;
+  out.pose.sequence = steps_++;
+  out.pose.T_world_camera = ekf_.T_world_camera();
+  out.pose.covariance = ekf_.poseCovariance();
+  out.pose.tracking_state = out.predict_status == EkfPredictStatus::kRejected
+                                ? TrackingState::kPredicted
+                                : TrackingState::kOk;
+  out.pose.source = config_.enabled ? PoseSource::kFilter : PoseSource::kOdometry;
+  return out;
+}
+
+}  // namespace slamd
