@@ -1,0 +1,49 @@
+#pragma once
+// File output for maps: crash-safe writes, PLY point clouds and 2D grid images.
+//
+// writeFileAtomically() is the basis of every file the mapper writes: the content goes to
+// "<path>.tmp" in the same folder, is fsynced, renamed over <path>, and the folder is fsynced, so
+// a crash or power cut at any moment leaves either the previous complete file or the new complete
+// file at <path>, never a torn one. A leftover "<path>.tmp" from an interrupted write is simply
+// overwritten by the next write. One writer per path at a time.
+
+#include <cstdint>
+#include <functional>
+#include <ostream>
+#include <string>
+#include <vector>
+
+#include "slamd/mapping/map_types.hpp"
+#include "slamd/mapping/point_cloud.hpp"
+
+namespace slamd {
+
+/// Writes a file crash-safely. `writer` streams the content and returns false to abandon the
+/// write (the temporary file is removed and <path> is untouched). Returns false with a sentence
+/// in *error on any failure (writer refused, open/write/fsync/rename error).
+bool writeFileAtomically(const std::string& path,
+                         const std::function<bool(std::ostream&)>& writer,
+                         std::string* error = nullptr);
+
+/// The temporary file name writeFileAtomically() uses for `path`.
+std::string temporaryPathFor(const std::string& path);
+
+enum class PlyFormat { kAscii, kBinary };
+
+/// Writes points (metres, any frame) with colours (BGR; white when `cloud` has none) as a PLY
+/// stream with float x y z and uchar red green blue.
+bool writePly(std::ostream& out, const PointCloud& cloud, PlyFormat format);
+
+/// Reads back a PLY file written by writePly (ASCII or binary little-endian; for tests and tools).
+/// Returns false on anything else.
+bool readPly(const std::string& path, PointCloud& cloud);
+
+/// Saves a grid as a navigation map: <path> ending in .pgm (binary P5) or .png, with
+/// occupied = 0 (black), free = 254 (white), unknown = 205, +v up; and a sidecar YAML file
+/// (<path> with the extension replaced by .yaml) in the common map_server layout (image,
+/// resolution, origin [u, v, 0], negate, occupied_thresh, free_thresh). Both are written
+/// atomically.
+bool saveOccupancyGrid(const OccupancyGrid2D& grid, const std::string& path,
+                       std::string* error = nullptr);
+
+}  // namespace slamd

@@ -1,0 +1,249 @@
+#pragma once
+// Mapper: posed depth frames -> probabilistic 3D voxel map (OctoMap), with incremental updates,
+// full maps, a 2D projection, exports, crash-safe persistence and re-integration after pose
+// corrections.
+//
+// Usage (the mapping thread owns the Mapper; it has no threads, locks or LCM inside):
+//   Mapper mapper(MappingConfig::load(config));
+//   for each frame with its pose:
+//     IntegrationResult r = mapper.integrate(*frame, T_world_camera, keyframe_id_or_nullopt);
+//     MapperOutputs out = mapper.poll(frame->utime);   // due updates / full map / snapshot
+//     if (out.update) publish(encodeMapUpdate(*out.update));
+//     if (out.full_map) publish(encodeFullMap(*out.full_map));
+//   on PUBLISH_MAP: mapper.requestFullMap();  on SAVE_MAP / shutdown: mapper.saveMaps(prefix);
+//   on corrected keyframe poses from the back end: mapper.rebuild(poses);
+//
+// Per frame: depth (CV_32FC1 metres, NaN = none) -> camera-frame cloud without NaN, inf, zero,
+// negative or out-of-range depths -> voxel-grid filter (camera frame) -> transform by
+// T_world_camera -> rays from the sensor origin (the camera centre, world frame) to each point:
+// voxels along a ray are updated as free (prob_miss), the endpoint voxel as occupied (prob_hit);
+// rays longer than max_range_m clear free space up to max_range_m only. Bad input (wrong image
+// type or size, invalid intrinsics, non-finite or non-rigid poses, points outside the map's
+// extent) never reaches OctoMap: it is rejected and counted in stats().
+//
+// Frames: T_world_camera maps camera optical-frame points (x right, y down, z forward, metres)
+// into the map frame (config.frame_id). Every coordinate the Mapper returns is in the map frame.
+
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <optional>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include <octomap/ColorOcTree.h>
+#include <octomap/OcTree.h>
+
+#include "slamd/common/rgbd_frame.hpp"
+#include "slamd/common/se3.hpp"
+#include "slamd/mapping/map_io.hpp"
+#include "slamd/mapping/map_types.hpp"
+#include "slamd/mapping/mapping_config.hpp"
+#include "slamd/mapping/point_cloud.hpp"
+
+namespace slamd {
+
+enum class IntegrationStatus {
+  kOk,
+  kBadFrame,  ///< depth not CV_32FC1, size differs from the intrinsics, or invalid intrinsics
+  kBadPose,   ///< non-finite pose, a rotation that is not orthonormal, or an origin off the map
+  kNoPoints,  ///< no valid depth left after filtering (the map is unchanged)
+};
+
+const char* toString(IntegrationStatus status);
+
+/// What one integrate() call did.
+struct IntegrationResult {
+  IntegrationStatus status = IntegrationStatus::kOk;
+  std::string error;            ///< a sentence when status != kOk
+  DepthCloudStats depth;        ///< per-pixel accounting of the depth image
+  std::size_t points_filtered = 0;   ///< points after the voxel-grid filter
+  std::size_t points_off_map = 0;    ///< points outside the OcTree's addressable extent
+  std::size_t free_voxels = 0;       ///< distinct voxels updated as free
+  std::size_t occupied_voxels = 0;   ///< distinct voxels updated as occupied
+  bool keyframe_cloud_kept = false;
+  double cloud_ms = 0.0;   ///< depth -> cloud
+  double filter_ms = 0.0;  ///< voxel-grid filter
+  double insert_ms = 0.0;  ///< transform + ray casting + OcTree update
+};
+
+/// Totals since construction (the daemon publishes them on the status channel).
+struct MapperStats {
+  std::int64_t frames_integrated = 0;
+  std::int64_t frames_bad_frame = 0;
+  std::int64_t frames_bad_pose = 0;
+  std::int64_t frames_no_points = 0;
+  std::int64_t depth_nan = 0;
+  std::int64_t depth_infinite = 0;
+  std::int64_t depth_zero = 0;
+  std::int64_t depth_negative = 0;
+  std::int64_t depth_out_of_range = 0;  ///< too near or too far
+  std::int64_t points_off_map = 0;
+  std::int64_t points_inserted = 0;     ///< endpoints after filtering, summed over frames
+  std::int64_t updates_published = 0;
+  std::int64_t full_maps_published = 0;
+  std::int64_t snapshots_written = 0;
+  std::int64_t snapshot_failures = 0;
+  std::int64_t keyframe_clouds = 0;          ///< currently kept
+  std::int64_t keyframe_clouds_refused = 0;  ///< not kept because of the memory budget
+  std::int64_t keyframe_cloud_bytes = 0;
+  std::int64_t rebuilds = 0;
+};
+
+/// Result of a save or load.
+struct MapFileResult {
+  bool ok = false;
+  std::string path;
+  std::string error;   ///< a sentence when !ok
+  double seconds = 0.0;
+};
+
+/// What poll() found due.
+struct MapperOutputs {
+  std::optional<MapUpdate> update;
+  std::optional<FullMap> full_map;
+  std::optional<MapFileResult> snapshot;
+};
+
+/// Result of rebuild().
+struct RebuildResult {
+  std::size_t keyframes_integrated = 0;
+  std::size_t unknown_ids = 0;  ///< ids in the request without a kept cloud
+  double seconds = 0.0;
+};
+
+class Mapper {
+ public:
+  /// Throws std::invalid_argument when config.validationError() is not empty. Loads
+  /// config.load_path when set (throws std::runtime_error when it cannot be read).
+  explicit Mapper(const MappingConfig& config);
+  ~Mapper();
+  Mapper(const Mapper&) = delete;
+  Mapper& operator=(const Mapper&) = delete;
+
+  /// Integrates one frame. @param T_world_camera pose of the camera optical frame in the map
+  /// frame (metres). @param keyframe_id when set (and keep_keyframe_clouds), the filtered
+  /// camera-frame cloud is kept under this id for rebuild(); an existing id is replaced.
+  IntegrationResult integrate(const RgbdFrame& frame, const SE3& T_world_camera,
+                              std::optional<std::int64_t> keyframe_id = std::nullopt);
+
+  /// Integrates a cloud already in the camera frame (no depth conversion, no filter).
+  /// @param cloud_camera points in the camera optical frame, metres (non-finite points dropped).
+  IntegrationResult integrateCloud(const PointCloud& cloud_camera, const SE3& T_world_camera,
+                                   Utime utime,
+                                   std::optional<std::int64_t> keyframe_id = std::nullopt);
+
+  // --- outputs --------------------------------------------------------------------------------
+  /// Returns the outputs due at `now` (message time, microseconds): an update every
+  /// 1/update_rate_hz, a full map every full_map_period_s or after requestFullMap(), a snapshot
+  /// every snapshot_period_s. An update is always emitted before a full map so that the map's
+  /// update_sequence covers it. Empty updates are not emitted.
+  MapperOutputs poll(Utime now);
+  /// The changes since the previous update (possibly none); advances the sequence.
+  MapUpdate takeUpdate();
+  /// The whole map now. Does not advance the update sequence.
+  FullMap fullMap();
+  /// Makes the next poll() emit a full map (the PUBLISH_MAP command).
+  void requestFullMap() { full_map_requested_ = true; }
+  bool fullMapRequested() const { return full_map_requested_; }
+  /// 2D projection of the configured height band (see OccupancyGrid2D).
+  OccupancyGrid2D projectToGrid();
+  OccupancyGrid2D projectToGrid(UpAxis up_axis, double min_height_m, double max_height_m);
+  /// Centres of every occupied finest voxel (map frame, metres) with voxel colours (white when
+  /// the map has no colour).
+  PointCloud occupiedCloud();
+  /// Writes occupiedCloud() as PLY, atomically.
+  MapFileResult exportOccupiedPly(const std::string& path, PlyFormat format);
+  /// Writes the kept keyframe clouds, moved by their poses into the map frame, concatenated and
+  /// voxel-filtered at voxel_m (metres; 0 = no filter), as a coloured PLY (paper 004's model).
+  MapFileResult exportKeyframeCloudPly(const std::string& path, double voxel_m, PlyFormat format);
+
+  // --- persistence ------------------------------------------------------------------------------
+  /// Saves the map crash-safely: .bt (maximum likelihood, OcTree::writeBinary format) or .ot
+  /// (full log-odds, and colour for a ColorOcTree), chosen by the extension.
+  MapFileResult saveMap(const std::string& path);
+  /// Saves <prefix>.bt and <prefix>.ot; the result of the first failure, else of the .ot.
+  MapFileResult saveMaps(const std::string& prefix);
+  /// Writes the snapshot now (config.snapshot_path); fails when no path is configured.
+  MapFileResult saveSnapshot();
+  /// Replaces the map by a saved .bt or .ot and continues mapping on it. The file's resolution
+  /// and tree type (OcTree or ColorOcTree) are adopted; the loaded map becomes the base that
+  /// rebuild() starts from. Subscribers resynchronise from the next full map.
+  MapFileResult loadMap(const std::string& path);
+
+  // --- re-integration -------------------------------------------------------------------------
+  /// Rebuilds the map from the base (empty, or the loaded map) and every kept keyframe cloud:
+  /// listed keyframes at their corrected poses (T_world_camera, map frame), the others at their
+  /// last known poses, in id order. Frames integrated without a keyframe id are not part of the
+  /// rebuilt map. Subscribers resynchronise from the full map the next poll() emits.
+  RebuildResult rebuild(const std::vector<std::pair<std::int64_t, SE3>>& keyframe_poses);
+  /// Forgets a keyframe's cloud (a keyframe culled by the back end).
+  void forgetKeyframe(std::int64_t keyframe_id);
+  /// Empties the map (the RESET command) and forgets every keyframe cloud and the base map.
+  void reset();
+
+  // --- access ---------------------------------------------------------------------------------
+  const MappingConfig& config() const { return config_; }
+  const MapperStats& stats() const { return stats_; }
+  bool hasColor() const { return color_tree_ != nullptr; }
+  double resolution() const;
+  /// The OcTree (null when the map has colour) or the ColorOcTree (null otherwise). Inner nodes
+  /// are brought up to date first. Read only; the mapping thread owns them.
+  const octomap::OcTree* ocTree();
+  const octomap::ColorOcTree* colorOcTree();
+  /// Finest voxel counts of the current map, and the OcTree's memory use in bytes.
+  std::size_t numLeafNodes() const;
+  std::size_t memoryBytes() const;
+  /// Occupancy at a point (map frame, metres): -1 unknown, 0 free, 1 occupied.
+  int occupancyAt(const Eigen::Vector3d& point_m) const;
+  /// The sequence number the next update will carry.
+  std::int64_t nextUpdateSequence() const { return next_update_sequence_; }
+  Utime latestUtime() const { return latest_utime_; }
+
+ private:
+  struct KeyframeCloud {
+    PointCloud cloud_camera;
+    SE3 T_world_camera = SE3::Identity();
+    Utime utime = 0;
+  };
+  struct Scratch;
+
+  IntegrationResult insertCameraCloud(const PointCloud& cloud_camera, const SE3& T_world_camera,
+                                      IntegrationResult result);
+  template <typename Tree>
+  void insertIntoTree(Tree& tree, const octomap::point3d& origin, const PointCloud& cloud_camera,
+                      IntegrationResult& result);
+  bool rejectBadPose(const SE3& T_world_camera, IntegrationResult& result);
+  void makeEmptyTree(double resolution_m, bool color);
+  void configureTree();
+  void ensureInnerOccupancy();
+  void afterMapReplaced();
+  bool keepKeyframe(std::int64_t id, const PointCloud& cloud, const SE3& T_world_camera,
+                    Utime utime);
+  template <typename Function>
+  decltype(auto) withTree(Function&& function);
+  template <typename Function>
+  decltype(auto) withTree(Function&& function) const;
+
+  MappingConfig config_;
+  std::unique_ptr<octomap::OcTree> tree_;
+  std::unique_ptr<octomap::ColorOcTree> color_tree_;
+  std::unique_ptr<octomap::AbstractOcTree> base_map_;  ///< loaded map rebuild() starts from
+  std::unique_ptr<Scratch> scratch_;
+  VoxelGridFilter voxel_filter_;
+  PointCloud cloud_;
+  PointCloud filtered_;
+  std::map<std::int64_t, KeyframeCloud> keyframes_;
+  MapperStats stats_;
+  bool inner_dirty_ = false;
+  int frames_since_prune_ = 0;
+  bool full_map_requested_ = false;
+  std::int64_t next_update_sequence_ = 0;
+  Utime latest_utime_ = 0;
+  std::optional<Utime> last_update_time_;
+  std::optional<Utime> last_full_map_time_;
+  std::optional<Utime> last_snapshot_time_;
+};
+
+}  // namespace slamd

@@ -1,0 +1,246 @@
+#include "slamd/mapping/map_io.hpp"
+
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <streambuf>
+
+#include <opencv2/imgcodecs.hpp>
+
+namespace slamd {
+
+namespace {
+
+/// An output stream buffer on a POSIX file descriptor, so the content can be fsynced.
+class FdOutputBuffer : public std::streambuf {
+ public:
+  explicit FdOutputBuffer(int fd) : fd_(fd), buffer_(1 << 16) {
+    setp(buffer_.data(), buffer_.data() + buffer_.size());
+  }
+  bool failed() const { return failed_; }
+  int savedErrno() const { return errno_; }
+
+ protected:
+  int_type overflow(int_type ch) override {
+    if (!flushBuffer()) return traits_type::eof();
+    if (!traits_type::eq_int_type(ch, traits_type::eof())) {
+      *pptr() = traits_type::to_char_type(ch);
+      pbump(1);
+    }
+    return traits_type::not_eof(ch);
+  }
+  int sync() override { return flushBuffer() ? 0 : -1; }
+
+ private:
+  bool flushBuffer() {
+    const char* data = pbase();
+    std::size_t remaining = static_cast<std::size_t>(pptr() - pbase());
+    while (remaining > 0 && !failed_) {
+      const ssize_t written = ::write(fd_, data, remaining);
+      if (written < 0) {
+        if (errno == EINTR) continue;
+        failed_ = true;
+        errno_ = errno;
+        break;
+      }
+      data += written;
+      remaining -= static_cast<std::size_t>(written);
+    }
+    setp(buffer_.data(), buffer_.data() + buffer_.size());
+    return !failed_;
+  }
+
+  int fd_;
+  std::vector<char> buffer_;
+  bool failed_ = false;
+  int errno_ = 0;
+};
+
+bool fail(std::string* error, const std::string& text) {
+  if (error) *error = text;
+  return false;
+}
+
+std::string errnoText(int error_number) { return std::strerror(error_number); }
+
+}  // namespace
+
+std::string temporaryPathFor(const std::string& path) { return path + ".tmp"; }
+
+bool writeFileAtomically(const std::string& path,
+                         const std::function<bool(std::ostream&)>& writer, std::string* error) {
+  const std::string tmp = temporaryPathFor(path);
+  const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  if (fd < 0) return fail(error, "cannot create " + tmp + ": " + errnoText(errno));
+  bool ok = true;
+  std::string why;
+  {
+    FdOutputBuffer buffer(fd);
+    std::ostream stream(&buffer);
+    bool accepted = false;
+    try {
+      accepted = writer(stream);
+    } catch (const std::exception& e) {
+      why = std::string("writer threw: ") + e.what();
+    }
+    stream.flush();
+    if (!accepted) {
+      ok = false;
+      if (why.empty()) why = "the writer abandoned the content";
+    } else if (buffer.failed() || !stream.good()) {
+      ok = false;
+      why = "write failed: " + errnoText(buffer.savedErrno());
+    }
+  }
+  // Data must be on disk before the rename makes it visible under the final name.
+  if (ok && ::fsync(fd) != 0) {
+    ok = false;
+    why = "fsync failed: " + errnoText(errno);
+  }
+  if (::close(fd) != 0 && ok) {
+    ok = false;
+    why = "close failed: " + errnoText(errno);
+  }
+  if (!ok) {
+    ::unlink(tmp.c_str());
+    return fail(error, "cannot write " + path + ": " + why);
+  }
+  if (::rename(tmp.c_str(), path.c_str()) != 0) {
+    const int saved = errno;
+    ::unlink(tmp.c_str());
+    return fail(error, "cannot rename " + tmp + " to " + path + ": " + errnoText(saved));
+  }
+  // The rename is durable only once the directory entry is on disk.
+  std::filesystem::path dir = std::filesystem::path(path).parent_path();
+  if (dir.empty()) dir = ".";
+  const int dir_fd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (dir_fd >= 0) {
+    const bool synced = ::fsync(dir_fd) == 0;
+    const int saved = errno;
+    ::close(dir_fd);
+    if (!synced) return fail(error, "fsync of " + dir.string() + " failed: " + errnoText(saved));
+  }
+  return true;
+}
+
+bool writePly(std::ostream& out, const PointCloud& cloud, PlyFormat format) {
+  const bool with_color = cloud.colors_bgr.size() == cloud.points.size() && cloud.hasColor();
+  out << "ply\nformat " << (format == PlyFormat::kBinary ? "binary_little_endian" : "ascii")
+      << " 1.0\ncomment slamd map export, metres\nelement vertex " << cloud.points.size()
+      << "\nproperty float x\nproperty float y\nproperty float z\n"
+         "property uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n";
+  for (std::size_t i = 0; i < cloud.points.size(); ++i) {
+    const Eigen::Vector3f& p = cloud.points[i];
+    const ColorBgr c = with_color ? cloud.colors_bgr[i] : ColorBgr{255, 255, 255};
+    if (format == PlyFormat::kBinary) {
+      // x86-64 is little-endian, the byte order the header declares.
+      const float xyz[3] = {p.x(), p.y(), p.z()};
+      const unsigned char rgb[3] = {c[2], c[1], c[0]};
+      out.write(reinterpret_cast<const char*>(xyz), sizeof(xyz));
+      out.write(reinterpret_cast<const char*>(rgb), sizeof(rgb));
+    } else {
+      out << p.x() << ' ' << p.y() << ' ' << p.z() << ' ' << int{c[2]} << ' ' << int{c[1]} << ' '
+          << int{c[0]} << '\n';
+    }
+  }
+  return out.good();
+}
+
+bool readPly(const std::string& path, PointCloud& cloud) {
+  cloud.clear();
+  std::ifstream in(path, std::ios::binary);
+  std::string line;
+  if (!std::getline(in, line) || line != "ply") return false;
+  bool binary = false;
+  std::size_t count = 0;
+  while (std::getline(in, line) && line != "end_header") {
+    std::istringstream words(line);
+    std::string word;
+    words >> word;
+    if (word == "format") {
+      words >> word;
+      binary = word == "binary_little_endian";
+      if (!binary && word != "ascii") return false;
+    } else if (word == "element") {
+      words >> word >> count;
+    }
+  }
+  if (!in || count > (std::size_t{1} << 31)) return false;
+  for (std::size_t i = 0; i < count; ++i) {
+    float xyz[3];
+    int rgb[3];
+    if (binary) {
+      unsigned char bytes[3];
+      in.read(reinterpret_cast<char*>(xyz), sizeof(xyz));
+      in.read(reinterpret_cast<char*>(bytes), sizeof(bytes));
+      for (int k = 0; k < 3; ++k) rgb[k] = bytes[k];
+    } else {
+      in >> xyz[0] >> xyz[1] >> xyz[2] >> rgb[0] >> rgb[1] >> rgb[2];
+    }
+    if (!in) return false;
+    cloud.points.emplace_back(xyz[0], xyz[1], xyz[2]);
+    cloud.colors_bgr.push_back({static_cast<std::uint8_t>(rgb[2]),
+                                static_cast<std::uint8_t>(rgb[1]),
+                                static_cast<std::uint8_t>(rgb[0])});
+  }
+  return true;
+}
+
+bool saveOccupancyGrid(const OccupancyGrid2D& grid, const std::string& path, std::string* error) {
+  if (grid.cells.empty() || grid.cells.type() != CV_8UC1) {
+    return fail(error, "cannot save an empty occupancy grid to " + path);
+  }
+  cv::Mat image(grid.cells.size(), CV_8UC1);
+  for (int row = 0; row < grid.cells.rows; ++row) {
+    // Image row 0 is the top, i.e. the highest v.
+    const std::uint8_t* src = grid.cells.ptr<std::uint8_t>(grid.cells.rows - 1 - row);
+    std::uint8_t* dst = image.ptr<std::uint8_t>(row);
+    for (int col = 0; col < grid.cells.cols; ++col) {
+      dst[col] = src[col] == OccupancyGrid2D::kOccupied ? 0
+                 : src[col] == OccupancyGrid2D::kFree   ? 254
+                                                        : 205;
+    }
+  }
+  const std::filesystem::path file(path);
+  const std::string extension = file.extension().string();
+  std::vector<std::uint8_t> bytes;
+  if (extension == ".png") {
+    if (!cv::imencode(".png", image, bytes)) return fail(error, "PNG encoding failed");
+  } else if (extension == ".pgm") {
+    const std::string header =
+        "P5\n" + std::to_string(image.cols) + " " + std::to_string(image.rows) + "\n255\n";
+    bytes.assign(header.begin(), header.end());
+    bytes.insert(bytes.end(), image.datastart, image.dataend);
+  } else {
+    return fail(error, path + ": the grid file must end in .pgm or .png");
+  }
+  const bool image_ok = writeFileAtomically(
+      path,
+      [&bytes](std::ostream& out) {
+        out.write(reinterpret_cast<const char*>(bytes.data()),
+                  static_cast<std::streamsize>(bytes.size()));
+        return true;
+      },
+      error);
+  if (!image_ok) return false;
+  std::filesystem::path yaml = file;
+  yaml.replace_extension(".yaml");
+  return writeFileAtomically(
+      yaml.string(),
+      [&](std::ostream& out) {
+        out << "image: " << file.filename().string() << "\nresolution: " << grid.resolution_m
+            << "\norigin: [" << grid.origin_u_m << ", " << grid.origin_v_m << ", 0.0]"
+            << "\nnegate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.196\n"
+            << "# slamd: up axis " << toString(grid.up_axis) << ", height band ["
+            << grid.min_height_m << ", " << grid.max_height_m << "] m\n";
+        return true;
+      },
+      error);
+}
+
+}  // namespace slamd

@@ -1,0 +1,874 @@
+#include "slamd/mapping/mapper.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <sstream>
+#include <stdexcept>
+#include <type_traits>
+
+#include <octomap/AbstractOcTree.h>
+
+namespace slamd {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double msSince(Clock::time_point start) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
+}
+
+double secondsSince(Clock::time_point start) {
+  return std::chrono::duration<double>(Clock::now() - start).count();
+}
+
+/// Empty when T is a finite rigid transform, otherwise why not.
+std::string poseError(const SE3& T) {
+  if (!T.matrix().allFinite()) return "pose is not finite";
+  const Eigen::Matrix3d R = T.linear();
+  if ((R.transpose() * R - Eigen::Matrix3d::Identity()).norm() > 1e-3 || R.determinant() < 0.0) {
+    return "pose rotation is not orthonormal";
+  }
+  if (!(T.matrix().row(3) - Eigen::RowVector4d(0, 0, 0, 1)).isZero(1e-9)) {
+    return "pose is not a rigid transform";
+  }
+  return {};
+}
+
+std::string extensionOf(const std::string& path) {
+  return std::filesystem::path(path).extension().string();
+}
+
+/// Per-frame voxel de-duplication in a dense bit mask over the frame's key bounding box.
+class DenseKeyMask {
+ public:
+  /// False when the box is too large for a mask (the caller falls back to a hash set).
+  bool reset(const octomap::OcTreeKey& min_key, const octomap::OcTreeKey& max_key) {
+    std::uint64_t cells = 1;
+    for (unsigned i = 0; i < 3; ++i) {
+      min_[i] = min_key[i];
+      dims_[i] = static_cast<std::uint64_t>(max_key[i] - min_key[i]) + 1;
+      cells *= dims_[i];
+    }
+    // 2^28 bits = 32 MiB: larger boxes (fine resolutions with long ranges) use the hash set.
+    if (cells > (std::uint64_t{1} << 28)) return false;
+    words_.assign((cells + 63) / 64, 0);
+    return true;
+  }
+
+  /// True the first time a key is marked in this frame.
+  bool mark(const octomap::OcTreeKey& key) {
+    const std::uint64_t x = static_cast<std::uint64_t>(key[0]) - min_[0];
+    const std::uint64_t y = static_cast<std::uint64_t>(key[1]) - min_[1];
+    const std::uint64_t z = static_cast<std::uint64_t>(key[2]) - min_[2];
+    // Unsigned wrap-around turns keys below the box into huge values, caught here too.
+    if (x >= dims_[0] || y >= dims_[1] || z >= dims_[2]) return false;
+    const std::uint64_t index = (z * dims_[1] + y) * dims_[0] + x;
+    std::uint64_t& word = words_[index >> 6];
+    const std::uint64_t bit = std::uint64_t{1} << (index & 63);
+    if (word & bit) return false;
+    word |= bit;
+    return true;
+  }
+
+ private:
+  std::uint64_t min_[3] = {0, 0, 0};
+  std::uint64_t dims_[3] = {1, 1, 1};
+  std::vector<std::uint64_t> words_;
+};
+
+}  // namespace
+
+struct Mapper::Scratch {
+  std::vector<Eigen::Vector3f> points_world;
+  std::vector<octomap::point3d> ends;
+  std::vector<octomap::OcTreeKey> end_keys;
+  std::vector<std::uint8_t> end_occupied;
+  std::vector<std::uint32_t> end_source;  ///< index of the point each end came from
+  std::vector<octomap::OcTreeKey> free_keys;
+  std::vector<octomap::OcTreeKey> occupied_keys;
+  DenseKeyMask mask;
+  octomap::KeySet key_set;
+  octomap::KeyRay ray;
+  octomap::Pointcloud octomap_cloud;
+};
+
+const char* toString(IntegrationStatus status) {
+  switch (status) {
+    case IntegrationStatus::kOk:
+      return "ok";
+    case IntegrationStatus::kBadFrame:
+      return "bad frame";
+    case IntegrationStatus::kBadPose:
+      return "bad pose";
+    case IntegrationStatus::kNoPoints:
+      return "no valid points";
+  }
+  return "unknown";
+}
+
+Eigen::Matrix3d gridAxes(UpAxis up_axis) {
+  const Eigen::Vector3d x = Eigen::Vector3d::UnitX();
+  const Eigen::Vector3d y = Eigen::Vector3d::UnitY();
+  const Eigen::Vector3d z = Eigen::Vector3d::UnitZ();
+  Eigen::Vector3d u;
+  Eigen::Vector3d up;
+  switch (up_axis) {
+    case UpAxis::kPlusX:
+      u = y, up = x;
+      break;
+    case UpAxis::kMinusX:
+      u = z, up = -x;
+      break;
+    case UpAxis::kPlusY:
+      u = x, up = y;
+      break;
+    case UpAxis::kPlusZ:
+      u = x, up = z;
+      break;
+    case UpAxis::kMinusZ:
+      u = x, up = -z;
+      break;
+    case UpAxis::kMinusY:
+    default:
+      u = x, up = -y;
+      break;
+  }
+  Eigen::Matrix3d R;
+  R.row(0) = u.transpose();
+  R.row(1) = up.cross(u).transpose();  // v = up x u makes (u, v, up) right-handed
+  R.row(2) = up.transpose();
+  return R;
+}
+
+std::uint8_t OccupancyGrid2D::at(double u_m, double v_m) const {
+  if (cells.empty() || !(resolution_m > 0.0)) return kUnknown;
+  const double ix = std::floor((u_m - origin_u_m) / resolution_m);
+  const double iy = std::floor((v_m - origin_v_m) / resolution_m);
+  if (!(ix >= 0 && iy >= 0 && ix < cells.cols && iy < cells.rows)) return kUnknown;
+  return cells.at<std::uint8_t>(static_cast<int>(iy), static_cast<int>(ix));
+}
+
+template <typename Function>
+decltype(auto) Mapper::withTree(Function&& function) {
+  if (color_tree_) return function(*color_tree_);
+  return function(*tree_);
+}
+
+template <typename Function>
+decltype(auto) Mapper::withTree(Function&& function) const {
+  if (color_tree_) return function(static_cast<const octomap::ColorOcTree&>(*color_tree_));
+  return function(static_cast<const octomap::OcTree&>(*tree_));
+}
+
+Mapper::Mapper(const MappingConfig& config) : config_(config), scratch_(new Scratch) {
+  if (const std::string error = config_.validationError(); !error.empty()) {
+    throw std::invalid_argument(error);
+  }
+  makeEmptyTree(config_.resolution_m, config_.color);
+  configureTree();
+  if (!config_.load_path.empty()) {
+    const MapFileResult loaded = loadMap(config_.load_path);
+    if (!loaded.ok) throw std::runtime_error(loaded.error);
+  }
+}
+
+Mapper::~Mapper() = default;
+
+void Mapper::makeEmptyTree(double resolution_m, bool color) {
+  tree_.reset();
+  color_tree_.reset();
+  if (color) {
+    color_tree_ = std::make_unique<octomap::ColorOcTree>(resolution_m);
+  } else {
+    tree_ = std::make_unique<octomap::OcTree>(resolution_m);
+  }
+  inner_dirty_ = false;
+}
+
+void Mapper::configureTree() {
+  withTree([this](auto& tree) {
+    tree.setProbHit(config_.prob_hit);
+    tree.setProbMiss(config_.prob_miss);
+    tree.setClampingThresMin(config_.clamp_min);
+    tree.setClampingThresMax(config_.clamp_max);
+    tree.setOccupancyThres(config_.occupancy_threshold);
+    tree.enableChangeDetection(true);
+    tree.resetChangeDetection();
+  });
+}
+
+double Mapper::resolution() const {
+  return withTree([](const auto& tree) { return tree.getResolution(); });
+}
+
+void Mapper::ensureInnerOccupancy() {
+  // Frames are inserted with OctoMap's lazy evaluation (inner nodes untouched, much faster); the
+  // inner nodes are refreshed only when something reads them.
+  if (!inner_dirty_) return;
+  withTree([](auto& tree) { tree.updateInnerOccupancy(); });
+  inner_dirty_ = false;
+}
+
+const octomap::OcTree* Mapper::ocTree() {
+  ensureInnerOccupancy();
+  return tree_.get();
+}
+
+const octomap::ColorOcTree* Mapper::colorOcTree() {
+  ensureInnerOccupancy();
+  return color_tree_.get();
+}
+
+std::size_t Mapper::numLeafNodes() const {
+  return withTree([](const auto& tree) { return tree.getNumLeafNodes(); });
+}
+
+std::size_t Mapper::memoryBytes() const {
+  return withTree([](const auto& tree) { return tree.memoryUsage(); });
+}
+
+int Mapper::occupancyAt(const Eigen::Vector3d& point_m) const {
+  if (!point_m.allFinite()) return -1;
+  return withTree([&point_m](const auto& tree) {
+    octomap::OcTreeKey key;
+    if (!tree.coordToKeyChecked(point_m.x(), point_m.y(), point_m.z(), key)) return -1;
+    const auto* node = tree.search(key);
+    if (node == nullptr) return -1;
+    return tree.isNodeOccupied(node) ? 1 : 0;
+  });
+}
+
+// --- integration -------------------------------------------------------------------------------
+
+bool Mapper::rejectBadPose(const SE3& T_world_camera, IntegrationResult& result) {
+  const std::string error = poseError(T_world_camera);
+  if (error.empty()) return false;
+  result.status = IntegrationStatus::kBadPose;
+  result.error = error;
+  ++stats_.frames_bad_pose;
+  return true;
+}
+
+IntegrationResult Mapper::integrate(const RgbdFrame& frame, const SE3& T_world_camera,
+                                    std::optional<std::int64_t> keyframe_id) {
+  IntegrationResult result;
+  if (rejectBadPose(T_world_camera, result)) return result;
+  const auto t_cloud = Clock::now();
+  DepthToCloudOptions options;
+  options.min_depth_m = config_.min_depth_m;
+  options.max_depth_m = config_.max_depth_m;
+  options.pixel_stride = config_.pixel_stride;
+  const DepthCloudStatus cloud_status = depthToCloud(frame.depth_m, frame.color_bgr,
+                                                     frame.intrinsics, options, cloud_,
+                                                     result.depth);
+  result.cloud_ms = msSince(t_cloud);
+  if (cloud_status != DepthCloudStatus::kOk) {
+    result.status = IntegrationStatus::kBadFrame;
+    result.error = toString(cloud_status);
+    ++stats_.frames_bad_frame;
+    return result;
+  }
+  stats_.depth_nan += result.depth.nan;
+  stats_.depth_infinite += result.depth.infinite;
+  stats_.depth_zero += result.depth.zero;
+  stats_.depth_negative += result.depth.negative;
+  stats_.depth_out_of_range += result.depth.too_near + result.depth.too_far;
+
+  const auto t_filter = Clock::now();
+  voxel_filter_.apply(cloud_, config_.voxel_filter_m, config_.voxel_filter_mode, filtered_);
+  result.filter_ms = msSince(t_filter);
+  result.points_filtered = filtered_.size();
+  latest_utime_ = std::max(latest_utime_, frame.utime);
+
+  result = insertCameraCloud(filtered_, T_world_camera, std::move(result));
+  if (result.status == IntegrationStatus::kOk && keyframe_id) {
+    result.keyframe_cloud_kept = keepKeyframe(*keyframe_id, filtered_, T_world_camera, frame.utime);
+  }
+  return result;
+}
+
+IntegrationResult Mapper::integrateCloud(const PointCloud& cloud_camera,
+                                         const SE3& T_world_camera, Utime utime,
+                                         std::optional<std::int64_t> keyframe_id) {
+  IntegrationResult result;
+  if (rejectBadPose(T_world_camera, result)) return result;
+  // Drop non-finite points here so that nothing below ever sees them.
+  filtered_.clear();
+  const bool with_color = cloud_camera.colors_bgr.size() == cloud_camera.points.size();
+  for (std::size_t i = 0; i < cloud_camera.points.size(); ++i) {
+    if (!cloud_camera.points[i].allFinite()) {
+      ++result.depth.nan;
+      continue;
+    }
+    filtered_.points.push_back(cloud_camera.points[i]);
+    if (with_color && cloud_camera.hasColor()) filtered_.colors_bgr.push_back(cloud_camera.colors_bgr[i]);
+  }
+  stats_.depth_nan += result.depth.nan;
+  result.depth.valid = static_cast<std::int64_t>(filtered_.size());
+  result.points_filtered = filtered_.size();
+  latest_utime_ = std::max(latest_utime_, utime);
+  result = insertCameraCloud(filtered_, T_world_camera, std::move(result));
+  if (result.status == IntegrationStatus::kOk && keyframe_id) {
+    result.keyframe_cloud_kept = keepKeyframe(*keyframe_id, filtered_, T_world_camera, utime);
+  }
+  return result;
+}
+
+IntegrationResult Mapper::insertCameraCloud(const PointCloud& cloud_camera,
+                                            const SE3& T_world_camera, IntegrationResult result) {
+  const auto t_insert = Clock::now();
+  const Eigen::Vector3d t = T_world_camera.translation();
+  const octomap::point3d origin(static_cast<float>(t.x()), static_cast<float>(t.y()),
+                                static_cast<float>(t.z()));
+  const bool origin_on_map = withTree([&origin](const auto& tree) {
+    octomap::OcTreeKey key;
+    return tree.coordToKeyChecked(origin, key);
+  });
+  if (!origin_on_map) {
+    result.status = IntegrationStatus::kBadPose;
+    result.error = "sensor origin lies outside the map's extent";
+    ++stats_.frames_bad_pose;
+    return result;
+  }
+  if (cloud_camera.empty()) {
+    result.status = IntegrationStatus::kNoPoints;
+    result.error = "no valid depth in the frame";
+    ++stats_.frames_no_points;
+    return result;
+  }
+  const Eigen::Matrix3f R = T_world_camera.linear().cast<float>();
+  const Eigen::Vector3f t_f = t.cast<float>();
+  std::vector<Eigen::Vector3f>& world = scratch_->points_world;
+  world.resize(cloud_camera.size());
+  for (std::size_t i = 0; i < cloud_camera.size(); ++i) world[i] = R * cloud_camera.points[i] + t_f;
+  withTree([&](auto& tree) { insertIntoTree(tree, origin, cloud_camera, result); });
+  inner_dirty_ = true;
+  stats_.points_off_map += static_cast<std::int64_t>(result.points_off_map);
+  stats_.points_inserted += static_cast<std::int64_t>(cloud_camera.size() - result.points_off_map);
+  ++stats_.frames_integrated;
+  if (config_.prune_every_frames > 0 && ++frames_since_prune_ >= config_.prune_every_frames) {
+    frames_since_prune_ = 0;
+    withTree([](auto& tree) { tree.prune(); });
+  }
+  result.insert_ms = msSince(t_insert);
+  return result;
+}
+
+template <typename Tree>
+void Mapper::insertIntoTree(Tree& tree, const octomap::point3d& origin,
+                            const PointCloud& cloud_camera, IntegrationResult& result) {
+  Scratch& s = *scratch_;
+  // s.points_world holds cloud_camera moved into the map frame (insertCameraCloud).
+  s.ends.clear();
+  s.end_keys.clear();
+  s.end_occupied.clear();
+  s.end_source.clear();
+  s.free_keys.clear();
+  s.occupied_keys.clear();
+
+  const float max_range = static_cast<float>(config_.max_range_m);
+  octomap::OcTreeKey origin_key;
+  tree.coordToKeyChecked(origin, origin_key);
+  octomap::OcTreeKey min_key = origin_key;
+  octomap::OcTreeKey max_key = origin_key;
+  for (std::size_t i = 0; i < s.points_world.size(); ++i) {
+    const Eigen::Vector3f& p = s.points_world[i];
+    const octomap::point3d point(p.x(), p.y(), p.z());
+    const octomap::point3d delta = point - origin;
+    const float range = static_cast<float>(delta.norm());
+    const bool occupied = range <= max_range;
+    // Rays beyond the maximum range only clear space up to it (OctoMap's convention).
+    const octomap::point3d end = occupied ? point : origin + delta * (max_range / range);
+    octomap::OcTreeKey key;
+    if (!tree.coordToKeyChecked(end, key)) {
+      ++result.points_off_map;
+      continue;
+    }
+    s.ends.push_back(end);
+    s.end_keys.push_back(key);
+    s.end_occupied.push_back(occupied ? 1 : 0);
+    s.end_source.push_back(static_cast<std::uint32_t>(i));
+    for (unsigned k = 0; k < 3; ++k) {
+      min_key[k] = std::min(min_key[k], key[k]);
+      max_key[k] = std::max(max_key[k], key[k]);
+    }
+  }
+
+  if (config_.insertion == InsertionMethod::kDenseMask) {
+    const bool dense = s.mask.reset(min_key, max_key);
+    s.key_set.clear();
+    const auto mark = [&s, dense](const octomap::OcTreeKey& key) {
+      return dense ? s.mask.mark(key) : s.key_set.insert(key).second;
+    };
+    // Endpoints first: a voxel hit by one ray and crossed by another counts as occupied.
+    for (std::size_t i = 0; i < s.end_keys.size(); ++i) {
+      if (s.end_occupied[i] && mark(s.end_keys[i])) s.occupied_keys.push_back(s.end_keys[i]);
+    }
+    for (std::size_t i = 0; i < s.ends.size(); ++i) {
+      if (!tree.computeRayKeys(origin, s.ends[i], s.ray)) continue;
+      for (const octomap::OcTreeKey& key : s.ray) {
+        if (mark(key)) s.free_keys.push_back(key);
+      }
+    }
+  } else {
+    s.octomap_cloud.clear();
+    s.octomap_cloud.reserve(s.ends.size());
+    for (std::size_t i = 0; i < s.ends.size(); ++i) {
+      const Eigen::Vector3f& p = s.points_world[s.end_source[i]];
+      s.octomap_cloud.push_back(p.x(), p.y(), p.z());
+    }
+    octomap::KeySet free_cells;
+    octomap::KeySet occupied_cells;
+    if (config_.insertion == InsertionMethod::kOctomapDiscrete) {
+      tree.computeDiscreteUpdate(s.octomap_cloud, origin, free_cells, occupied_cells,
+                                 config_.max_range_m);
+    } else {
+      tree.computeUpdate(s.octomap_cloud, origin, free_cells, occupied_cells,
+                         config_.max_range_m);
+    }
+    s.free_keys.assign(free_cells.begin(), free_cells.end());
+    s.occupied_keys.assign(occupied_cells.begin(), occupied_cells.end());
+  }
+
+  // Lazy evaluation: leaves only; inner nodes are refreshed when read (ensureInnerOccupancy).
+  for (const octomap::OcTreeKey& key : s.free_keys) tree.updateNode(key, false, true);
+  for (const octomap::OcTreeKey& key : s.occupied_keys) tree.updateNode(key, true, true);
+  result.free_voxels = s.free_keys.size();
+  result.occupied_voxels = s.occupied_keys.size();
+
+  if constexpr (std::is_same_v<Tree, octomap::ColorOcTree>) {
+    if (cloud_camera.hasColor()) {
+      for (std::size_t i = 0; i < s.end_keys.size(); ++i) {
+        if (!s.end_occupied[i]) continue;
+        const ColorBgr& c = cloud_camera.colors_bgr[s.end_source[i]];
+        tree.averageNodeColor(s.end_keys[i], c[2], c[1], c[0]);
+      }
+    }
+  }
+}
+
+bool Mapper::keepKeyframe(std::int64_t id, const PointCloud& cloud, const SE3& T_world_camera,
+                          Utime utime) {
+  if (!config_.keep_keyframe_clouds) return false;
+  const auto bytesOf = [](const PointCloud& c) {
+    return static_cast<std::int64_t>(c.points.size() * sizeof(Eigen::Vector3f) +
+                                     c.colors_bgr.size() * sizeof(ColorBgr));
+  };
+  std::int64_t total = stats_.keyframe_cloud_bytes;
+  const auto existing = keyframes_.find(id);
+  if (existing != keyframes_.end()) total -= bytesOf(existing->second.cloud_camera);
+  const std::int64_t budget = std::int64_t{config_.keyframe_cloud_budget_mb} << 20;
+  if (total + bytesOf(cloud) > budget) {
+    ++stats_.keyframe_clouds_refused;
+    return false;
+  }
+  KeyframeCloud& kept = keyframes_[id];
+  kept.cloud_camera.points.assign(cloud.points.begin(), cloud.points.end());
+  kept.cloud_camera.colors_bgr.assign(cloud.colors_bgr.begin(), cloud.colors_bgr.end());
+  kept.T_world_camera = T_world_camera;
+  kept.utime = utime;
+  stats_.keyframe_cloud_bytes = total + bytesOf(cloud);
+  stats_.keyframe_clouds = static_cast<std::int64_t>(keyframes_.size());
+  return true;
+}
+
+// --- outputs -------------------------------------------------------------------------------------
+
+MapUpdate Mapper::takeUpdate() {
+  MapUpdate update;
+  update.utime = latest_utime_;
+  update.resolution_m = resolution();
+  update.frame_id = config_.frame_id;
+  update.sequence = next_update_sequence_++;
+  withTree([&update](auto& tree) {
+    update.voxels.reserve(tree.numChangesDetected());
+    for (auto it = tree.changedKeysBegin(); it != tree.changedKeysEnd(); ++it) {
+      // search() finds the leaf (or the pruned ancestor holding its value); inner nodes are not
+      // needed, so lazy evaluation is no obstacle.
+      const auto* node = tree.search(it->first);
+      if (node == nullptr) continue;
+      const octomap::point3d c = tree.keyToCoord(it->first);
+      update.voxels.push_back({Eigen::Vector3f(c.x(), c.y(), c.z()), node->getLogOdds()});
+    }
+    tree.resetChangeDetection();
+  });
+  ++stats_.updates_published;
+  return update;
+}
+
+FullMap Mapper::fullMap() {
+  FullMap map;
+  map.utime = latest_utime_;
+  map.resolution_m = resolution();
+  map.frame_id = config_.frame_id;
+  map.update_sequence = next_update_sequence_;
+  std::ostringstream stream(std::ios::binary);
+  withTree([&stream](auto& tree) {
+    tree.prune();
+    tree.writeBinaryData(stream);
+  });
+  const std::string bytes = stream.str();
+  map.data.assign(bytes.begin(), bytes.end());
+  ++stats_.full_maps_published;
+  return map;
+}
+
+MapperOutputs Mapper::poll(Utime now) {
+  MapperOutputs out;
+  // Periods run on message time. The first call starts each clock; a clock that goes backwards
+  // (a log replayed again) restarts.
+  const auto due = [now](std::optional<Utime>& last, double period_s, bool fire_first) {
+    if (!(period_s > 0.0)) return false;
+    if (!last || now < *last) {
+      last = now;
+      return fire_first;
+    }
+    // 1 ms of slack: frame stamps jitter, and 30 Hz stamps are 33,333 us apart, so a 10 Hz
+    // output would otherwise wait for every fourth frame instead of every third.
+    if (static_cast<double>(now - *last) >= period_s * 1e6 - 1000.0) {
+      last = now;
+      return true;
+    }
+    return false;
+  };
+  const auto pending = [this]() {
+    return withTree([](const auto& tree) { return tree.numChangesDetected(); }) > 0;
+  };
+  const bool updates_on = config_.update_rate_hz > 0.0;
+  if (updates_on && due(last_update_time_, 1.0 / config_.update_rate_hz, true) && pending()) {
+    out.update = takeUpdate();
+  }
+  if (due(last_full_map_time_, config_.full_map_period_s, false) || full_map_requested_) {
+    last_full_map_time_ = now;
+    if (updates_on && !out.update && pending()) out.update = takeUpdate();
+    out.full_map = fullMap();
+    full_map_requested_ = false;
+  }
+  if (!config_.snapshot_path.empty() && due(last_snapshot_time_, config_.snapshot_period_s, false)) {
+    out.snapshot = saveSnapshot();
+  }
+  return out;
+}
+
+OccupancyGrid2D Mapper::projectToGrid() {
+  return projectToGrid(config_.up_axis, config_.projection_min_height_m,
+                       config_.projection_max_height_m);
+}
+
+OccupancyGrid2D Mapper::projectToGrid(UpAxis up_axis, double min_height_m, double max_height_m) {
+  OccupancyGrid2D grid;
+  grid.up_axis = up_axis;
+  grid.min_height_m = min_height_m;
+  grid.max_height_m = max_height_m;
+  const double res = resolution();
+  grid.resolution_m = res;
+  const Eigen::Matrix3d R = gridAxes(up_axis);
+  struct Footprint {
+    double u0, v0;  // lower corner, metres
+    int cells;      // edge in cells
+    bool occupied;
+  };
+  std::vector<Footprint> footprints;
+  withTree([&](const auto& tree) {
+    for (auto it = tree.begin_leafs(), end = tree.end_leafs(); it != end; ++it) {
+      const double size = it.getSize();
+      const octomap::point3d c = it.getCoordinate();
+      const Eigen::Vector3d g = R * Eigen::Vector3d(c.x(), c.y(), c.z());
+      if (g.z() + 0.5 * size <= min_height_m || g.z() - 0.5 * size >= max_height_m) continue;
+      footprints.push_back({g.x() - 0.5 * size, g.y() - 0.5 * size,
+                            static_cast<int>(std::lround(size / res)), tree.isNodeOccupied(*it)});
+    }
+  });
+  if (footprints.empty()) return grid;
+  double u_min = std::numeric_limits<double>::max();
+  double v_min = u_min;
+  double u_max = -u_min;
+  double v_max = -u_min;
+  for (const Footprint& f : footprints) {
+    u_min = std::min(u_min, f.u0);
+    v_min = std::min(v_min, f.v0);
+    u_max = std::max(u_max, f.u0 + f.cells * res);
+    v_max = std::max(v_max, f.v0 + f.cells * res);
+  }
+  // Voxel faces lie on multiples of the resolution; snap away float noise.
+  grid.origin_u_m = std::round(u_min / res) * res;
+  grid.origin_v_m = std::round(v_min / res) * res;
+  const long cols = std::lround((u_max - grid.origin_u_m) / res);
+  const long rows = std::lround((v_max - grid.origin_v_m) / res);
+  if (cols <= 0 || rows <= 0 || cols * rows > 400'000'000L) return grid;
+  grid.cells = cv::Mat(static_cast<int>(rows), static_cast<int>(cols), CV_8UC1,
+                       cv::Scalar(OccupancyGrid2D::kUnknown));
+  // Free first, then occupied: any occupied voxel in the band makes its column an obstacle.
+  for (const bool occupied_pass : {false, true}) {
+    for (const Footprint& f : footprints) {
+      if (f.occupied != occupied_pass) continue;
+      const long ix0 = std::lround((f.u0 - grid.origin_u_m) / res);
+      const long iy0 = std::lround((f.v0 - grid.origin_v_m) / res);
+      for (long iy = std::max(0L, iy0); iy < std::min(rows, iy0 + f.cells); ++iy) {
+        auto* row = grid.cells.ptr<std::uint8_t>(static_cast<int>(iy));
+        for (long ix = std::max(0L, ix0); ix < std::min(cols, ix0 + f.cells); ++ix) {
+          if (occupied_pass) {
+            row[ix] = OccupancyGrid2D::kOccupied;
+          } else if (row[ix] == OccupancyGrid2D::kUnknown) {
+            row[ix] = OccupancyGrid2D::kFree;
+          }
+        }
+      }
+    }
+  }
+  return grid;
+}
+
+PointCloud Mapper::occupiedCloud() {
+  PointCloud cloud;
+  const double res = resolution();
+  withTree([&](const auto& tree) {
+    using NodeT = std::decay_t<decltype(*tree.begin_leafs())>;
+    for (auto it = tree.begin_leafs(), end = tree.end_leafs(); it != end; ++it) {
+      if (!tree.isNodeOccupied(*it)) continue;
+      ColorBgr color{255, 255, 255};
+      if constexpr (std::is_same_v<NodeT, octomap::ColorOcTreeNode>) {
+        const octomap::ColorOcTreeNode::Color c = it->getColor();
+        color = {c.b, c.g, c.r};
+      }
+      // A pruned occupied leaf stands for n^3 finest voxels.
+      const int n = static_cast<int>(std::lround(it.getSize() / res));
+      const octomap::point3d c = it.getCoordinate();
+      const double half = 0.5 * it.getSize();
+      const double corner[3] = {static_cast<double>(c.x()) - half,
+                                static_cast<double>(c.y()) - half,
+                                static_cast<double>(c.z()) - half};
+      for (int i = 0; i < n; ++i) {
+        for (int j = 0; j < n; ++j) {
+          for (int k = 0; k < n; ++k) {
+            cloud.points.emplace_back(static_cast<float>(corner[0] + (i + 0.5) * res),
+                                      static_cast<float>(corner[1] + (j + 0.5) * res),
+                                      static_cast<float>(corner[2] + (k + 0.5) * res));
+            cloud.colors_bgr.push_back(color);
+          }
+        }
+      }
+    }
+  });
+  return cloud;
+}
+
+MapFileResult Mapper::exportOccupiedPly(const std::string& path, PlyFormat format) {
+  const auto start = Clock::now();
+  MapFileResult result;
+  result.path = path;
+  const PointCloud cloud = occupiedCloud();
+  result.ok = writeFileAtomically(
+      path, [&](std::ostream& out) { return writePly(out, cloud, format); }, &result.error);
+  result.seconds = secondsSince(start);
+  return result;
+}
+
+MapFileResult Mapper::exportKeyframeCloudPly(const std::string& path, double voxel_m,
+                                             PlyFormat format) {
+  const auto start = Clock::now();
+  MapFileResult result;
+  result.path = path;
+  PointCloud merged;
+  bool all_colored = true;
+  for (const auto& entry : keyframes_) all_colored = all_colored && entry.second.cloud_camera.hasColor();
+  for (const auto& entry : keyframes_) {
+    const KeyframeCloud& kf = entry.second;
+    const Eigen::Matrix3f R = kf.T_world_camera.linear().cast<float>();
+    const Eigen::Vector3f t = kf.T_world_camera.translation().cast<float>();
+    for (std::size_t i = 0; i < kf.cloud_camera.size(); ++i) {
+      merged.points.push_back(R * kf.cloud_camera.points[i] + t);
+      if (all_colored) merged.colors_bgr.push_back(kf.cloud_camera.colors_bgr[i]);
+    }
+  }
+  PointCloud filtered;
+  VoxelGridFilter filter;
+  filter.apply(merged, voxel_m, VoxelFilterMode::kCentroid, filtered);
+  result.ok = writeFileAtomically(
+      path, [&](std::ostream& out) { return writePly(out, filtered, format); }, &result.error);
+  result.seconds = secondsSince(start);
+  return result;
+}
+
+// --- persistence ---------------------------------------------------------------------------------
+
+MapFileResult Mapper::saveMap(const std::string& path) {
+  const auto start = Clock::now();
+  MapFileResult result;
+  result.path = path;
+  const std::string extension = extensionOf(path);
+  if (extension == ".bt" || extension == ".ot") {
+    const bool full = extension == ".ot";
+    // .ot stores inner nodes too, so they must be current; .bt stores leaves only.
+    if (full) ensureInnerOccupancy();
+    withTree([](auto& tree) { tree.prune(); });
+    result.ok = writeFileAtomically(
+        path,
+        [this, full](std::ostream& out) {
+          return withTree([&out, full](const auto& tree) {
+            return full ? tree.write(out) : tree.writeBinaryConst(out);
+          });
+        },
+        &result.error);
+  } else {
+    result.error = path + ": map files must end in .bt or .ot";
+  }
+  result.seconds = secondsSince(start);
+  return result;
+}
+
+MapFileResult Mapper::saveMaps(const std::string& prefix) {
+  const MapFileResult binary = saveMap(prefix + ".bt");
+  if (!binary.ok) return binary;
+  return saveMap(prefix + ".ot");
+}
+
+MapFileResult Mapper::saveSnapshot() {
+  if (config_.snapshot_path.empty()) {
+    MapFileResult result;
+    result.error = "no snapshot path configured (mapping.snapshot_path)";
+    ++stats_.snapshot_failures;
+    return result;
+  }
+  MapFileResult result = saveMap(config_.snapshot_path);
+  ++(result.ok ? stats_.snapshots_written : stats_.snapshot_failures);
+  return result;
+}
+
+MapFileResult Mapper::loadMap(const std::string& path) {
+  const auto start = Clock::now();
+  MapFileResult result;
+  result.path = path;
+  const std::string extension = extensionOf(path);
+  std::unique_ptr<octomap::OcTree> plain;
+  std::unique_ptr<octomap::ColorOcTree> colored;
+  if (extension == ".bt") {
+    std::ifstream in(path, std::ios::binary);
+    if (!in) {
+      result.error = "cannot open " + path;
+      return result;
+    }
+    bool ok = false;
+    if (config_.color) {
+      colored = std::make_unique<octomap::ColorOcTree>(config_.resolution_m);
+      ok = colored->readBinary(in);
+    } else {
+      plain = std::make_unique<octomap::OcTree>(config_.resolution_m);
+      ok = plain->readBinary(in);
+    }
+    if (!ok) {
+      result.error = path + " is not a readable OctoMap binary (.bt) file";
+      return result;
+    }
+  } else if (extension == ".ot") {
+    if (!std::filesystem::is_regular_file(path)) {
+      result.error = "cannot open " + path;
+      return result;
+    }
+    std::unique_ptr<octomap::AbstractOcTree> any(octomap::AbstractOcTree::read(path));
+    if (auto* p = dynamic_cast<octomap::ColorOcTree*>(any.get())) {
+      any.release();
+      colored.reset(p);
+    } else if (auto* q = dynamic_cast<octomap::OcTree*>(any.get())) {
+      any.release();
+      plain.reset(q);
+    } else {
+      result.error = path + " is not a readable OcTree or ColorOcTree (.ot) file";
+      return result;
+    }
+  } else {
+    result.error = path + ": map files must end in .bt or .ot";
+    return result;
+  }
+  tree_ = std::move(plain);
+  color_tree_ = std::move(colored);
+  if (tree_) {
+    base_map_ = std::make_unique<octomap::OcTree>(*tree_);
+  } else {
+    base_map_ = std::make_unique<octomap::ColorOcTree>(*color_tree_);
+  }
+  keyframes_.clear();
+  stats_.keyframe_clouds = 0;
+  stats_.keyframe_cloud_bytes = 0;
+  inner_dirty_ = false;
+  afterMapReplaced();
+  result.ok = true;
+  result.seconds = secondsSince(start);
+  return result;
+}
+
+void Mapper::afterMapReplaced() {
+  configureTree();
+  // Deletions cannot be expressed as updates: skip one sequence number so that subscribers see
+  // a gap and resynchronise from the full map requested here.
+  ++next_update_sequence_;
+  full_map_requested_ = true;
+  frames_since_prune_ = 0;
+}
+
+// --- re-integration --------------------------------------------------------------------------------
+
+RebuildResult Mapper::rebuild(const std::vector<std::pair<std::int64_t, SE3>>& keyframe_poses) {
+  const auto start = Clock::now();
+  RebuildResult result;
+  for (const auto& [id, pose] : keyframe_poses) {
+    const auto it = keyframes_.find(id);
+    if (it == keyframes_.end() || !poseError(pose).empty()) {
+      ++result.unknown_ids;
+      continue;
+    }
+    it->second.T_world_camera = pose;
+  }
+  const double res = resolution();
+  const bool color = hasColor();
+  if (auto* base_color = dynamic_cast<octomap::ColorOcTree*>(base_map_.get())) {
+    tree_.reset();
+    color_tree_ = std::make_unique<octomap::ColorOcTree>(*base_color);
+  } else if (auto* base_plain = dynamic_cast<octomap::OcTree*>(base_map_.get())) {
+    color_tree_.reset();
+    tree_ = std::make_unique<octomap::OcTree>(*base_plain);
+  } else {
+    makeEmptyTree(res, color);
+  }
+  configureTree();
+  // Change detection off while re-inserting: the full map replaces every update anyway.
+  withTree([](auto& tree) { tree.enableChangeDetection(false); });
+  const MapperStats saved_stats = stats_;
+  for (const auto& entry : keyframes_) {
+    const IntegrationResult r =
+        insertCameraCloud(entry.second.cloud_camera, entry.second.T_world_camera, {});
+    if (r.status == IntegrationStatus::kOk) ++result.keyframes_integrated;
+  }
+  // Re-insertion is not new data: the per-frame totals stay as they were.
+  stats_ = saved_stats;
+  ++stats_.rebuilds;
+  afterMapReplaced();
+  result.seconds = secondsSince(start);
+  return result;
+}
+
+void Mapper::forgetKeyframe(std::int64_t keyframe_id) {
+  const auto it = keyframes_.find(keyframe_id);
+  if (it == keyframes_.end()) return;
+  stats_.keyframe_cloud_bytes -= static_cast<std::int64_t>(
+      it->second.cloud_camera.points.size() * sizeof(Eigen::Vector3f) +
+      it->second.cloud_camera.colors_bgr.size() * sizeof(ColorBgr));
+  keyframes_.erase(it);
+  stats_.keyframe_clouds = static_cast<std::int64_t>(keyframes_.size());
+}
+
+void Mapper::reset() {
+  keyframes_.clear();
+  stats_.keyframe_clouds = 0;
+  stats_.keyframe_cloud_bytes = 0;
+  base_map_.reset();
+  makeEmptyTree(resolution(), hasColor());
+  afterMapReplaced();
+}
+
+}  // namespace slamd

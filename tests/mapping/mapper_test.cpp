@@ -1,0 +1,349 @@
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+#include <random>
+
+#include <opencv2/imgcodecs.hpp>
+
+#include "box_room.hpp"
+#include "slamd/mapping/map_io.hpp"
+#include "slamd/mapping/mapper.hpp"
+#include "test_data.hpp"
+
+namespace slamd {
+namespace {
+
+using test::BoxRoom;
+
+MappingConfig testConfig() {
+  MappingConfig c;
+  c.update_rate_hz = 0.0;
+  c.full_map_period_s = 0.0;
+  c.snapshot_period_s = 0.0;
+  return c;
+}
+
+void buildRoom(Mapper& mapper, const BoxRoom& room, int yaw_steps = 8) {
+  Utime utime = 1'000'000;
+  for (const SE3& T : test::lookAroundPoses(yaw_steps)) {
+    RgbdFrame frame = room.render(T);
+    frame.utime = utime += 33'333;
+    ASSERT_EQ(mapper.integrate(frame, T).status, IntegrationStatus::kOk);
+  }
+}
+
+/// Fraction of `samples` points for which `predicate(occupancy)` holds.
+template <typename Sampler, typename Predicate>
+double fraction(const Mapper& mapper, int samples, Sampler sample, Predicate predicate) {
+  int good = 0;
+  for (int i = 0; i < samples; ++i) good += predicate(mapper.occupancyAt(sample())) ? 1 : 0;
+  return static_cast<double>(good) / samples;
+}
+
+TEST(Mapper, SyntheticRoomHasOccupiedWallsFreeInteriorAndUnknownOutside) {
+  const BoxRoom room;
+  Mapper mapper(testConfig());
+  buildRoom(mapper, room);
+  std::mt19937 rng(42);
+  std::uniform_real_distribution<double> band(-0.3, 0.3);  // seen at every pitch
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  // Walls: points on the four vertical faces (x = +-2.02, z = -2.02 / 2.52) at eye height.
+  const auto on_wall = [&]() {
+    const int face = static_cast<int>(unit(rng) * 4);
+    const double s = unit(rng);
+    const double y = band(rng);
+    if (face == 0) return Eigen::Vector3d(room.min_m.x(), y, -1.9 + 4.3 * s);
+    if (face == 1) return Eigen::Vector3d(room.max_m.x(), y, -1.9 + 4.3 * s);
+    if (face == 2) return Eigen::Vector3d(-1.9 + 3.8 * s, y, room.min_m.z());
+    return Eigen::Vector3d(-1.9 + 3.8 * s, y, room.max_m.z());
+  };
+  const double walls = fraction(mapper, 2000, on_wall, [](int o) { return o == 1; });
+  // Interior: at least 0.15 m inside the walls, 0.3..  m from the camera, at eye height.
+  const auto inside = [&]() {
+    while (true) {
+      const Eigen::Vector3d p(-1.85 + 3.7 * unit(rng), band(rng), -1.85 + 4.2 * unit(rng));
+      if (std::hypot(p.x(), p.z()) > 0.3) return p;
+    }
+  };
+  const double interior = fraction(mapper, 2000, inside, [](int o) { return o == 0; });
+  // Outside: 0.1 .. 1 m beyond a wall, floor or ceiling.
+  const auto outside = [&]() {
+    Eigen::Vector3d p(-2.0 + 4.0 * unit(rng), -1.2 + 2.2 * unit(rng), -2.0 + 4.5 * unit(rng));
+    const int axis = static_cast<int>(unit(rng) * 3);
+    const double beyond = 0.1 + 0.9 * unit(rng);
+    p[axis] = unit(rng) < 0.5 ? room.min_m[axis] - beyond : room.max_m[axis] + beyond;
+    return p;
+  };
+  const double unknown = fraction(mapper, 2000, outside, [](int o) { return o == -1; });
+  EXPECT_GT(walls, 0.97) << "walls occupied";
+  EXPECT_GT(interior, 0.97) << "interior free";
+  EXPECT_EQ(unknown, 1.0) << "outside unknown";
+  EXPECT_EQ(mapper.stats().frames_integrated, 24);
+  EXPECT_EQ(mapper.stats().depth_nan, 0);
+}
+
+TEST(Mapper, DenseMaskInsertionGivesExactlyOctomapsResult) {
+  const BoxRoom room;
+  MappingConfig dense_config = testConfig();
+  MappingConfig octomap_config = testConfig();
+  octomap_config.insertion = InsertionMethod::kOctomap;
+  Mapper dense(dense_config);
+  Mapper reference(octomap_config);
+  buildRoom(dense, room, 4);
+  buildRoom(reference, room, 4);
+  const octomap::OcTree& a = *dense.ocTree();
+  const octomap::OcTree& b = *reference.ocTree();
+  ASSERT_GT(a.getNumLeafNodes(), 10000u);
+  std::size_t compared = 0;
+  for (auto it = a.begin_leafs(); it != a.end_leafs(); ++it) {
+    const octomap::OcTreeNode* other = b.search(it.getKey(), static_cast<unsigned>(it.getDepth()));
+    ASSERT_NE(other, nullptr);
+    ASSERT_FLOAT_EQ(it->getLogOdds(), other->getLogOdds());
+    ++compared;
+  }
+  EXPECT_EQ(compared, b.getNumLeafNodes());
+}
+
+TEST(Mapper, InvalidDepthNeverReachesTheOcTree) {
+  const BoxRoom room;
+  const SE3 T = SE3::Identity();
+  RgbdFrame clean = room.render(T);
+  RgbdFrame dirty = clean;
+  dirty.depth_m = clean.depth_m.clone();
+  // Every other column invalid in one of five ways; the valid columns are untouched.
+  const float bad[] = {std::numeric_limits<float>::quiet_NaN(), 0.0f, -1.0f,
+                       std::numeric_limits<float>::infinity(), -std::numeric_limits<float>::infinity()};
+  for (int v = 0; v < dirty.depth_m.rows; ++v) {
+    for (int u = 1; u < dirty.depth_m.cols; u += 2) dirty.depth_m.at<float>(v, u) = bad[(u / 2 + v) % 5];
+  }
+  RgbdFrame only_valid = clean;
+  only_valid.depth_m = dirty.depth_m.clone();
+  for (int v = 0; v < only_valid.depth_m.rows; ++v) {
+    for (int u = 1; u < only_valid.depth_m.cols; u += 2) {
+      only_valid.depth_m.at<float>(v, u) = std::numeric_limits<float>::quiet_NaN();
+    }
+  }
+  Mapper a(testConfig());
+  Mapper b(testConfig());
+  const IntegrationResult ra = a.integrate(dirty, T);
+  const IntegrationResult rb = b.integrate(only_valid, T);
+  ASSERT_EQ(ra.status, IntegrationStatus::kOk);
+  EXPECT_EQ(ra.depth.valid, 640 * 480 / 2);
+  EXPECT_EQ(ra.depth.rejected(), 640 * 480 / 2);
+  EXPECT_GT(ra.depth.nan, 0);
+  EXPECT_GT(ra.depth.zero, 0);
+  EXPECT_GT(ra.depth.negative, 0);
+  EXPECT_GT(ra.depth.infinite, 0);
+  EXPECT_EQ(a.stats().depth_nan + a.stats().depth_zero + a.stats().depth_negative +
+                a.stats().depth_infinite,
+            640 * 480 / 2);
+  EXPECT_EQ(ra.occupied_voxels, rb.occupied_voxels);
+  EXPECT_EQ(ra.free_voxels, rb.free_voxels);
+  EXPECT_EQ(a.numLeafNodes(), b.numLeafNodes());
+
+  // A frame with no valid depth at all changes nothing.
+  Mapper c(testConfig());
+  RgbdFrame empty = clean;
+  empty.depth_m.setTo(std::numeric_limits<float>::quiet_NaN());
+  EXPECT_EQ(c.integrate(empty, T).status, IntegrationStatus::kNoPoints);
+  empty.depth_m.setTo(0.0f);
+  EXPECT_EQ(c.integrate(empty, T).status, IntegrationStatus::kNoPoints);
+  EXPECT_EQ(c.numLeafNodes(), 0u);
+  EXPECT_EQ(c.stats().frames_no_points, 2);
+}
+
+TEST(Mapper, BadFramesAndPosesAreRejectedAndCounted) {
+  const BoxRoom room;
+  Mapper mapper(testConfig());
+  RgbdFrame frame = room.render(SE3::Identity());
+  SE3 nan_pose = SE3::Identity();
+  nan_pose.translation().x() = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_EQ(mapper.integrate(frame, nan_pose).status, IntegrationStatus::kBadPose);
+  SE3 sheared = SE3::Identity();
+  sheared.linear()(0, 1) = 0.5;
+  EXPECT_EQ(mapper.integrate(frame, sheared).status, IntegrationStatus::kBadPose);
+  SE3 far_away = SE3::Identity();
+  far_away.translation() = Eigen::Vector3d(1e7, 0, 0);
+  EXPECT_EQ(mapper.integrate(frame, far_away).status, IntegrationStatus::kBadPose);
+  RgbdFrame wrong_type = frame;
+  frame.depth_m.convertTo(wrong_type.depth_m, CV_16UC1, 1000.0);
+  EXPECT_EQ(mapper.integrate(wrong_type, SE3::Identity()).status, IntegrationStatus::kBadFrame);
+  RgbdFrame wrong_size = frame;
+  wrong_size.depth_m = frame.depth_m(cv::Rect(0, 0, 320, 240)).clone();
+  EXPECT_EQ(mapper.integrate(wrong_size, SE3::Identity()).status, IntegrationStatus::kBadFrame);
+  PointCloud nan_cloud;
+  nan_cloud.points = {{std::nanf(""), 0, 1}, {0, 0, std::numeric_limits<float>::infinity()}};
+  EXPECT_EQ(mapper.integrateCloud(nan_cloud, SE3::Identity(), 0).status,
+            IntegrationStatus::kNoPoints);
+  EXPECT_EQ(mapper.numLeafNodes(), 0u);
+  EXPECT_EQ(mapper.stats().frames_bad_pose, 3);
+  EXPECT_EQ(mapper.stats().frames_bad_frame, 2);
+  EXPECT_EQ(mapper.stats().frames_integrated, 0);
+  // Colour of the wrong size is ignored, the depth still integrates.
+  RgbdFrame odd_color = frame;
+  odd_color.color_bgr = cv::Mat(10, 10, CV_8UC3);
+  EXPECT_EQ(mapper.integrate(odd_color, SE3::Identity()).status, IntegrationStatus::kOk);
+}
+
+TEST(Mapper, RaysBeyondMaxRangeOnlyClearSpace) {
+  MappingConfig config = testConfig();
+  config.max_range_m = 1.0;
+  config.voxel_filter_m = 0.0;
+  Mapper mapper(config);
+  PointCloud cloud;
+  cloud.points = {{0.0f, 0.0f, 3.01f}};
+  ASSERT_EQ(mapper.integrateCloud(cloud, SE3::Identity(), 0).status, IntegrationStatus::kOk);
+  EXPECT_EQ(mapper.occupancyAt({0.0, 0.0, 0.52}), 0);
+  EXPECT_EQ(mapper.occupancyAt({0.0, 0.0, 3.01}), -1);
+  EXPECT_EQ(mapper.occupancyAt({0.0, 0.0, 2.0}), -1);
+}
+
+TEST(Mapper, PollEmitsUpdatesAtTheConfiguredRateAndFullMapsOnRequest) {
+  MappingConfig config = testConfig();
+  config.update_rate_hz = 10.0;
+  config.full_map_period_s = 1.0;
+  Mapper mapper(config);
+  const BoxRoom room;
+  int updates = 0;
+  int full_maps = 0;
+  std::int64_t expected_sequence = 0;
+  Utime utime = 1'000'000;
+  for (const SE3& T : test::lookAroundPoses(8)) {
+    RgbdFrame frame = room.render(T);
+    frame.utime = utime += 33'333;
+    mapper.integrate(frame, T);
+    const MapperOutputs out = mapper.poll(frame.utime);
+    if (out.update) {
+      EXPECT_EQ(out.update->sequence, expected_sequence++);
+      EXPECT_FALSE(out.update->voxels.empty());
+      ++updates;
+    }
+    if (out.full_map) {
+      EXPECT_EQ(out.full_map->update_sequence, expected_sequence);
+      ++full_maps;
+    }
+  }
+  // 24 frames over 0.8 s at 10 Hz: the first frame, then every third frame.
+  EXPECT_GE(updates, 8);
+  EXPECT_LE(updates, 9);
+  EXPECT_EQ(full_maps, 0);
+  mapper.requestFullMap();
+  const MapperOutputs out = mapper.poll(utime);
+  ASSERT_TRUE(out.full_map.has_value());
+  EXPECT_GT(out.full_map->data.size(), 100u);
+  EXPECT_FALSE(mapper.fullMapRequested());
+}
+
+TEST(Mapper, RebuildAtCorrectedPosesEqualsMappingAtThosePoses) {
+  const BoxRoom room;
+  const std::vector<SE3> truth = test::lookAroundPoses(4);
+  MappingConfig config = testConfig();
+  Mapper corrected(config);
+  Mapper reference(config);
+  std::vector<std::pair<std::int64_t, SE3>> poses;
+  for (std::size_t i = 0; i < truth.size(); ++i) {
+    const RgbdFrame frame = room.render(truth[i]);
+    SE3 drifted = truth[i];
+    drifted.translation() += Eigen::Vector3d(0.03 * static_cast<double>(i), 0.0, 0.02);
+    ASSERT_TRUE(corrected.integrate(frame, drifted, static_cast<std::int64_t>(i)).keyframe_cloud_kept);
+    reference.integrate(frame, truth[i]);
+    poses.emplace_back(static_cast<std::int64_t>(i), truth[i]);
+  }
+  poses.emplace_back(999, SE3::Identity());  // unknown id
+  const std::int64_t sequence_before = corrected.nextUpdateSequence();
+  const RebuildResult r = corrected.rebuild(poses);
+  EXPECT_EQ(r.keyframes_integrated, truth.size());
+  EXPECT_EQ(r.unknown_ids, 1u);
+  EXPECT_EQ(corrected.nextUpdateSequence(), sequence_before + 1);
+  EXPECT_TRUE(corrected.fullMapRequested());
+  const octomap::OcTree& a = *corrected.ocTree();
+  const octomap::OcTree& b = *reference.ocTree();
+  EXPECT_EQ(a.getNumLeafNodes(), b.getNumLeafNodes());
+  for (auto it = b.begin_leafs(); it != b.end_leafs(); ++it) {
+    const octomap::OcTreeNode* other = a.search(it.getKey(), static_cast<unsigned>(it.getDepth()));
+    ASSERT_NE(other, nullptr);
+    ASSERT_FLOAT_EQ(it->getLogOdds(), other->getLogOdds());
+  }
+  EXPECT_EQ(corrected.stats().keyframe_clouds, static_cast<std::int64_t>(truth.size()));
+  corrected.forgetKeyframe(0);
+  EXPECT_EQ(corrected.stats().keyframe_clouds, static_cast<std::int64_t>(truth.size()) - 1);
+}
+
+TEST(Mapper, KeyframeCloudsRespectTheMemoryBudget) {
+  MappingConfig config = testConfig();
+  config.keyframe_cloud_budget_mb = 1;  // a 5 cm filtered frame is ~100-300 kB
+  Mapper mapper(config);
+  const BoxRoom room;
+  int kept = 0;
+  const RgbdFrame frame = room.render(SE3::Identity());
+  for (int i = 0; i < 40; ++i) {
+    kept += mapper.integrate(frame, SE3::Identity(), i).keyframe_cloud_kept;
+  }
+  EXPECT_GT(kept, 0);
+  EXPECT_LT(kept, 40);
+  EXPECT_EQ(mapper.stats().keyframe_clouds_refused, 40 - kept);
+  EXPECT_LE(mapper.stats().keyframe_cloud_bytes, 1 << 20);
+}
+
+TEST(Mapper, ProjectionShowsWallsAsObstaclesAroundFreeFloorSpace) {
+  const BoxRoom room;
+  Mapper mapper(testConfig());
+  buildRoom(mapper, room);
+  // World = first camera frame, y down: up is -y, so height = -y. Band around eye height.
+  const OccupancyGrid2D grid = mapper.projectToGrid(UpAxis::kMinusY, -0.3, 0.3);
+  ASSERT_FALSE(grid.cells.empty());
+  // (u, v, up) = (x, z, -y): u = x, v = z.
+  EXPECT_EQ(grid.at(room.max_m.x(), 0.3), OccupancyGrid2D::kOccupied);
+  EXPECT_EQ(grid.at(room.min_m.x(), -0.7), OccupancyGrid2D::kOccupied);
+  EXPECT_EQ(grid.at(0.4, room.max_m.z()), OccupancyGrid2D::kOccupied);
+  EXPECT_EQ(grid.at(1.0, 1.0), OccupancyGrid2D::kFree);
+  EXPECT_EQ(grid.at(-1.2, -1.3), OccupancyGrid2D::kFree);
+  EXPECT_EQ(grid.at(3.0, 0.0), OccupancyGrid2D::kUnknown);
+  EXPECT_NEAR(grid.origin_u_m, -2.05, 1e-9);
+  EXPECT_NEAR(grid.origin_v_m, -2.05, 1e-9);
+  const auto dir = test::makeTempDir("grid");
+  std::string error;
+  ASSERT_TRUE(saveOccupancyGrid(grid, (dir / "room.pgm").string(), &error)) << error;
+  ASSERT_TRUE(saveOccupancyGrid(grid, (dir / "room.png").string(), &error)) << error;
+  const cv::Mat pgm = cv::imread((dir / "room.pgm").string(), cv::IMREAD_UNCHANGED);
+  ASSERT_EQ(pgm.size(), grid.cells.size());
+  EXPECT_TRUE(std::filesystem::exists(dir / "room.yaml"));
+  std::filesystem::remove_all(dir);
+}
+
+TEST(Mapper, PlyExportsHoldEveryOccupiedVoxelWithColour) {
+  MappingConfig config = testConfig();
+  config.color = true;
+  Mapper mapper(config);
+  const BoxRoom room;
+  for (int i = 0; i < 3; ++i) {
+    const SE3 T = test::lookAroundPoses(4)[static_cast<std::size_t>(i)];
+    mapper.integrate(room.render(T), T, i);
+  }
+  ASSERT_TRUE(mapper.hasColor());
+  const PointCloud occupied = mapper.occupiedCloud();
+  ASSERT_GT(occupied.size(), 1000u);
+  const auto dir = test::makeTempDir("ply");
+  for (const PlyFormat format : {PlyFormat::kAscii, PlyFormat::kBinary}) {
+    const std::string path = (dir / "map.ply").string();
+    ASSERT_TRUE(mapper.exportOccupiedPly(path, format).ok);
+    PointCloud back;
+    ASSERT_TRUE(readPly(path, back));
+    ASSERT_EQ(back.size(), occupied.size());
+    EXPECT_NEAR(back.points[7].x(), occupied.points[7].x(), 1e-4f);
+    EXPECT_EQ(back.colors_bgr[7], occupied.colors_bgr[7]);
+  }
+  // Voxel colours come from the rendered walls, not the white default.
+  EXPECT_NE(occupied.colors_bgr[0], (ColorBgr{255, 255, 255}));
+  const MapFileResult clouds = mapper.exportKeyframeCloudPly((dir / "kf.ply").string(), 0.05,
+                                                             PlyFormat::kBinary);
+  ASSERT_TRUE(clouds.ok) << clouds.error;
+  PointCloud kf;
+  ASSERT_TRUE(readPly((dir / "kf.ply").string(), kf));
+  EXPECT_GT(kf.size(), 1000u);
+  std::filesystem::remove_all(dir);
+}
+
+}  // namespace
+}  // namespace slamd

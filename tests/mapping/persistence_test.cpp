@@ -1,0 +1,198 @@
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <csignal>
+#include <filesystem>
+#include <fstream>
+
+#include "box_room.hpp"
+#include "slamd/mapping/map_io.hpp"
+#include "slamd/mapping/mapper.hpp"
+#include "test_data.hpp"
+
+namespace slamd {
+namespace {
+
+namespace fs = std::filesystem;
+
+MappingConfig quietConfig() {
+  MappingConfig c;
+  c.update_rate_hz = 0.0;
+  c.full_map_period_s = 0.0;
+  c.snapshot_period_s = 0.0;
+  return c;
+}
+
+void mapSomeRoom(Mapper& mapper, int frames) {
+  const test::BoxRoom room;
+  const auto poses = test::lookAroundPoses(8);
+  for (int i = 0; i < frames; ++i) {
+    const SE3& T = poses[static_cast<std::size_t>(i) % poses.size()];
+    RgbdFrame frame = room.render(T);
+    frame.utime = 1'000'000 + i * 33'333;
+    ASSERT_EQ(mapper.integrate(frame, T, i).status, IntegrationStatus::kOk);
+  }
+}
+
+/// Every finest voxel's state in a tree: -1/0/1 per key, pruned leaves expanded.
+std::map<octomap::OcTreeKey, int, bool (*)(const octomap::OcTreeKey&, const octomap::OcTreeKey&)>
+voxelStates(const octomap::AbstractOccupancyOcTree& any_tree) {
+  const auto less = +[](const octomap::OcTreeKey& a, const octomap::OcTreeKey& b) {
+    return std::tie(a[0], a[1], a[2]) < std::tie(b[0], b[1], b[2]);
+  };
+  std::map<octomap::OcTreeKey, int, bool (*)(const octomap::OcTreeKey&, const octomap::OcTreeKey&)>
+      states(less);
+  const auto& tree = dynamic_cast<const octomap::OcTree&>(any_tree);
+  for (auto it = tree.begin_leafs(); it != tree.end_leafs(); ++it) {
+    const int n = 1 << (tree.getTreeDepth() - it.getDepth());
+    const octomap::OcTreeKey base = it.getIndexKey();
+    for (int i = 0; i < n; ++i) {
+      for (int j = 0; j < n; ++j) {
+        for (int k = 0; k < n; ++k) {
+          octomap::OcTreeKey key(static_cast<octomap::key_type>(base[0] + i),
+                                 static_cast<octomap::key_type>(base[1] + j),
+                                 static_cast<octomap::key_type>(base[2] + k));
+          states[key] = tree.isNodeOccupied(*it) ? 1 : 0;
+        }
+      }
+    }
+  }
+  return states;
+}
+
+TEST(MapPersistence, SavedBtReadsBackWithTheSameOccupancyEverywhere) {
+  Mapper mapper(quietConfig());
+  mapSomeRoom(mapper, 12);
+  const auto dir = test::makeTempDir("bt");
+  const std::string path = (dir / "room.bt").string();
+  const MapFileResult saved = mapper.saveMap(path);
+  ASSERT_TRUE(saved.ok) << saved.error;
+  EXPECT_FALSE(fs::exists(temporaryPathFor(path)));
+  octomap::OcTree back(0.1);
+  ASSERT_TRUE(back.readBinary(path));
+  EXPECT_DOUBLE_EQ(back.getResolution(), 0.05);
+  const auto original = voxelStates(*mapper.ocTree());
+  const auto loaded = voxelStates(back);
+  ASSERT_GT(original.size(), 10000u);
+  EXPECT_TRUE(original == loaded);
+  fs::remove_all(dir);
+}
+
+TEST(MapPersistence, SavedOtKeepsEveryLogOddsAndLoadsToContinueMapping) {
+  Mapper mapper(quietConfig());
+  mapSomeRoom(mapper, 6);
+  const auto dir = test::makeTempDir("ot");
+  const MapFileResult saved = mapper.saveMaps((dir / "room").string());
+  ASSERT_TRUE(saved.ok) << saved.error;
+  ASSERT_TRUE(fs::exists(dir / "room.bt"));
+  std::unique_ptr<octomap::AbstractOcTree> any(octomap::AbstractOcTree::read((dir / "room.ot").string()));
+  auto* back = dynamic_cast<octomap::OcTree*>(any.get());
+  ASSERT_NE(back, nullptr);
+  const octomap::OcTree& tree = *mapper.ocTree();
+  ASSERT_EQ(back->getNumLeafNodes(), tree.getNumLeafNodes());
+  for (auto it = tree.begin_leafs(); it != tree.end_leafs(); ++it) {
+    const auto* node = back->search(it.getKey(), static_cast<unsigned>(it.getDepth()));
+    ASSERT_NE(node, nullptr);
+    ASSERT_FLOAT_EQ(node->getLogOdds(), it->getLogOdds());
+  }
+
+  // Continue mapping on the loaded .ot: the result equals mapping everything in one go.
+  MappingConfig config = quietConfig();
+  config.load_path = (dir / "room.ot").string();
+  Mapper resumed(config);
+  EXPECT_EQ(resumed.nextUpdateSequence(), 1);  // subscribers must resynchronise
+  EXPECT_TRUE(resumed.fullMapRequested());
+  Mapper straight(quietConfig());
+  mapSomeRoom(straight, 12);
+  const test::BoxRoom room;
+  const auto poses = test::lookAroundPoses(8);
+  for (int i = 6; i < 12; ++i) resumed.integrate(room.render(poses[static_cast<std::size_t>(i)]), poses[static_cast<std::size_t>(i)]);
+  EXPECT_TRUE(voxelStates(*resumed.ocTree()) == voxelStates(*straight.ocTree()));
+
+  MappingConfig missing = quietConfig();
+  missing.load_path = (dir / "nope.ot").string();
+  EXPECT_THROW(Mapper{missing}, std::runtime_error);
+  EXPECT_FALSE(resumed.loadMap((dir / "room.txt").string()).ok);
+  fs::remove_all(dir);
+}
+
+TEST(MapPersistence, AWriteThatFailsLeavesThePreviousFileIntact) {
+  const auto dir = test::makeTempDir("atomic");
+  const std::string path = (dir / "file.txt").string();
+  ASSERT_TRUE(writeFileAtomically(path, [](std::ostream& out) {
+    out << "version one\n";
+    return true;
+  }));
+  std::string error;
+  EXPECT_FALSE(writeFileAtomically(
+      path,
+      [](std::ostream& out) {
+        out << std::string(1 << 20, 'x');  // half written, then the writer gives up
+        return false;
+      },
+      &error));
+  EXPECT_FALSE(error.empty());
+  EXPECT_FALSE(writeFileAtomically(path, [](std::ostream&) -> bool {
+    throw std::runtime_error("disk on fire");
+  }));
+  std::ifstream in(path);
+  std::string line;
+  std::getline(in, line);
+  EXPECT_EQ(line, "version one");
+  EXPECT_FALSE(fs::exists(temporaryPathFor(path)));
+  EXPECT_FALSE(writeFileAtomically((dir / "no" / "such" / "dir.txt").string(),
+                                   [](std::ostream&) { return true; }, &error));
+  fs::remove_all(dir);
+}
+
+TEST(MapPersistence, ASnapshotKilledMidWriteLeavesThePreviousSnapshotIntact) {
+  const auto dir = test::makeTempDir("snapshot");
+  MappingConfig config = quietConfig();
+  config.snapshot_path = (dir / "snapshot.bt").string();
+  config.snapshot_period_s = 1.0;
+  Mapper mapper(config);
+  mapSomeRoom(mapper, 3);
+  ASSERT_FALSE(mapper.poll(1'000'000).snapshot.has_value());  // starts the clock
+  const MapperOutputs out = mapper.poll(2'100'000);
+  ASSERT_TRUE(out.snapshot.has_value());
+  ASSERT_TRUE(out.snapshot->ok) << out.snapshot->error;
+  const auto first = voxelStates(*mapper.ocTree());
+
+  // More mapping, then a snapshot process killed (SIGKILL) halfway through writing the file.
+  mapSomeRoom(mapper, 9);
+  const pid_t child = fork();
+  ASSERT_GE(child, 0);
+  if (child == 0) {
+    writeFileAtomically(config.snapshot_path, [&mapper](std::ostream& stream) {
+      std::ostringstream full;
+      mapper.ocTree()->writeBinaryConst(full);
+      const std::string bytes = full.str();
+      stream.write(bytes.data(), static_cast<std::streamsize>(bytes.size() / 2));
+      stream.flush();
+      raise(SIGKILL);
+      return true;
+    });
+    _exit(0);
+  }
+  int status = 0;
+  ASSERT_EQ(waitpid(child, &status, 0), child);
+  ASSERT_TRUE(WIFSIGNALED(status));
+  EXPECT_TRUE(fs::exists(temporaryPathFor(config.snapshot_path)));  // the torn temporary
+  octomap::OcTree previous(0.05);
+  ASSERT_TRUE(previous.readBinary(config.snapshot_path));
+  EXPECT_TRUE(voxelStates(previous) == first);
+
+  // The next snapshot overwrites the leftover temporary and replaces the file.
+  const MapFileResult next = mapper.saveSnapshot();
+  ASSERT_TRUE(next.ok) << next.error;
+  EXPECT_FALSE(fs::exists(temporaryPathFor(config.snapshot_path)));
+  octomap::OcTree latest(0.05);
+  ASSERT_TRUE(latest.readBinary(config.snapshot_path));
+  EXPECT_TRUE(voxelStates(latest) == voxelStates(*mapper.ocTree()));
+  EXPECT_EQ(mapper.stats().snapshots_written, 2);
+  fs::remove_all(dir);
+}
+
+}  // namespace
+}  // namespace slamd
