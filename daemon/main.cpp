@@ -1,0 +1,47 @@
+// slamd: the real-time RGB-D SLAM daemon. See README.md and `slamd --help`.
+
+#include <iostream>
+
+#include "slamd/app/slam_daemon.hpp"
+#include "slamd/capture/frame_source.hpp"
+#include "slamd/common/log.hpp"
+#include "slamd/common/program_options.hpp"
+
+int main(int argc, char** argv) {
+  using namespace slamd;
+  ShutdownSignals signals;  // first: blocks SIGINT/SIGTERM before any thread starts
+  ProgramOptions options(
+      "slamd",
+      "Real-time RGB-D SLAM daemon: estimates the camera pose and builds a voxel map from an "
+      "RGB-D source, publishing poses, status and maps on LCM. SIGINT/SIGTERM stop it cleanly "
+      "(queued frames drained, outputs written); a second signal exits at once.");
+  options.addOption("source", "SPEC",
+                    "tum:DIR | openni2[:URI] | oni:FILE | lcm:CHANNEL | synthetic:SCENE "
+                    "(default: daemon.source)");
+  options.addOption("lcm-url", "URL", "LCM URL (default: lcm.url or $LCM_DEFAULT_URL)");
+  options.addOption("trajectory-out", "FILE", "write the trajectory (TUM format) at exit");
+  options.addOption("map-out", "FILE.bt", "write the map (.bt or .ot) at exit");
+  if (!options.parse(argc, argv)) return options.exitCode();
+
+  DaemonOverrides overrides;
+  overrides.source = options.value("source");
+  overrides.lcm_url = options.value("lcm-url");
+  overrides.trajectory_out = options.value("trajectory-out");
+  overrides.map_out = options.value("map-out");
+  std::unique_ptr<SlamDaemon> daemon;
+  try {
+    Config config = options.loadConfig();
+    daemon = std::make_unique<SlamDaemon>(config, overrides);
+    reportConfig(config, "slamd");
+  } catch (const ConfigError& e) {
+    std::cerr << "slamd: configuration error: " << e.what() << "\n";
+    return kExitConfigError;
+  } catch (const SourceError& e) {
+    std::cerr << "slamd: source error: " << e.what() << "\n";
+    return kExitSourceError;
+  } catch (const std::exception& e) {
+    std::cerr << "slamd: " << e.what() << "\n";
+    return kExitFailure;
+  }
+  return daemon->run(signals);
+}

@@ -1,0 +1,60 @@
+#pragma once
+// DaemonConfig: the daemon's own options (keys `daemon.*`); each stage reads its own section
+// (tracking.*, filter.*, mapping.*, capture.*, synthetic.*, channels.*, lcm.*).
+
+#include <string>
+
+#include "slamd/common/config.hpp"
+
+namespace slamd {
+
+struct DaemonConfig {
+  /// daemon.source (string, default "synthetic:room"): tum:DIR | openni2[:URI] | oni:FILE |
+  /// lcm:CHANNEL | synthetic:SCENE; --source overrides it.
+  std::string source = "synthetic:room";
+  /// daemon.trajectory_out (path, default ""): TUM trajectory written at exit (--trajectory-out).
+  std::string trajectory_out;
+  /// daemon.map_out (path .bt or .ot, default ""): map written at exit (--map-out).
+  std::string map_out;
+  /// daemon.status_period_s (double, default 1, 0.05..60, s): SLAMD_STATUS publication period.
+  double status_period_s = 1.0;
+  /// daemon.drain_deadline_s (double, default 5, 0..600, s): at shutdown, how long the stages may
+  /// take to finish queued frames before the rest is discarded (and counted).
+  double drain_deadline_s = 5.0;
+  /// daemon.heartbeat_period_s (double, default 0.2, 0.01..10, s): with no frame for this long the
+  /// capture thread sends a heartbeat so later stages can serve commands.
+  double heartbeat_period_s = 0.2;
+  /// daemon.tracking_queue (int, default 2, 1..1000): frames waiting for tracking. Live and
+  /// real-time sources drop the oldest when it is full; datasets played as fast as possible wait.
+  int tracking_queue = 2;
+  /// daemon.filter_queue (int, default 8, 1..1000): tracked frames waiting for the filter (never
+  /// dropped).
+  int filter_queue = 8;
+  /// daemon.publish_queue (int, default 16, 1..1000): poses waiting for publication (never dropped).
+  int publish_queue = 16;
+  /// daemon.mapping_queue (int, default 2, 1..1000): frames waiting for mapping; live runs skip to
+  /// the newest (the map only needs recent views), datasets played as fast as possible wait.
+  int mapping_queue = 2;
+  /// daemon.publish_frames (bool, default false): republish every processed frame on
+  /// channels.frames (so lcm-logger captures the input and a log can be replayed into slamd).
+  bool publish_frames = false;
+  /// daemon.frame_jpeg_quality (int, default 90, 1..100) and daemon.frame_depth_encoding
+  /// (png|zlib, default png) for republished frames.
+  int frame_jpeg_quality = 90;
+  std::string frame_depth_encoding = "png";
+  /// mapping.enabled (bool, default true): run the mapping stage (voxel filter + OctoMap).
+  bool mapping_enabled = true;
+  /// mapping.keyframes_only (bool, default false): integrate only keyframes instead of every
+  /// tracked frame (less CPU, sparser free space).
+  bool map_keyframes_only = false;
+  /// daemon.map_save_path (path, default "slamd_map.bt"): where SAVE_MAP writes when the command
+  /// names no file and no --map-out was given.
+  std::string map_save_path = "slamd_map.bt";
+  /// daemon.world_frame / daemon.camera_frame (strings): frame names in published poses.
+  std::string world_frame = "world";
+  std::string camera_frame = "camera";
+
+  static DaemonConfig load(Config& config);
+};
+
+}  // namespace slamd

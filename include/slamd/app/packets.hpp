@@ -1,0 +1,42 @@
+#pragma once
+// What flows between the daemon's threads. Every packet is immutable once pushed and carries the
+// frame it came from; a packet without a frame is a heartbeat, sent by the capture thread when no
+// frame arrived for a while (paused, waiting for a live source) so that downstream stages still
+// wake up to serve commands such as SAVE_MAP.
+
+#include <optional>
+
+#include "slamd/common/pose_estimate.hpp"
+#include "slamd/common/rgbd_frame.hpp"
+#include "slamd/filter/pose_ekf.hpp"
+#include "slamd/filter/vanishing_point_detector.hpp"
+#include "slamd/tracking/visual_odometry.hpp"
+
+namespace slamd {
+
+/// capture -> tracking
+struct CapturePacket {
+  RgbdFramePtr frame;  ///< null: heartbeat
+};
+
+/// tracking -> filter
+struct TrackedPacket {
+  RgbdFramePtr frame;                     ///< null: heartbeat
+  std::optional<OdometryResult> odometry;  ///< set for every frame
+};
+
+/// A vanishing point found in a frame and what the filter did with it.
+struct VanishingPointReport {
+  VanishingPoint detection;
+  VpUpdateResult update;
+};
+
+/// filter -> publisher, mapping
+struct EstimatedPacket {
+  RgbdFramePtr frame;  ///< null: heartbeat
+  std::optional<OdometryResult> odometry;
+  PoseEstimate pose;  ///< the pose slamd publishes for this frame
+  std::optional<VanishingPointReport> vanishing_point;
+};
+
+}  // namespace slamd

@@ -1,0 +1,67 @@
+#pragma once
+// SlamDaemon: the slamd program. Wires the capture, tracking, filter, publishing and mapping
+// stages with the pipeline runner (one thread each, bounded lock-free queues between them),
+// speaks LCM to the rest of the robot, and runs until the source ends, a SHUTDOWN command arrives
+// or the process is signalled.
+//
+//   Config config = Config::fromFile("config/tum_fr1.yaml");
+//   DaemonOverrides overrides;  overrides.source = "tum:/data/fr1_xyz";
+//   SlamDaemon daemon(config, overrides);       // reads every module's configuration
+//   reportConfig(config, "slamd");
+//   return daemon.run(signals);                 // exit code
+//
+// Threads: capture, tracking, filter, publish and mapping belong to the pipeline; the LCM bus has
+// its own receive thread (commands only: it pushes them into a queue); the calling thread runs
+// the control loop (commands, 1 Hz status) and, after the pipeline has stopped, writes outputs.
+
+#include <memory>
+#include <string>
+
+#include "slamd/common/config.hpp"
+#include "slamd/common/shutdown_signals.hpp"
+
+namespace slamd {
+
+/// Command-line values that take precedence over the configuration file.
+struct DaemonOverrides {
+  std::string source;          ///< --source
+  std::string lcm_url;         ///< --lcm-url
+  std::string trajectory_out;  ///< --trajectory-out
+  std::string map_out;         ///< --map-out
+};
+
+/// What a finished run did (logged at exit, returned for tests).
+struct DaemonSummary {
+  std::uint64_t frames_captured = 0;
+  std::uint64_t frames_tracked = 0;
+  std::uint64_t poses_published = 0;
+  std::uint64_t frames_mapped = 0;
+  std::uint64_t drops = 0;
+  std::uint64_t errors = 0;
+  std::uint64_t malformed_commands = 0;
+  double duration_s = 0.0;
+  double end_to_end_p50_ms = 0.0;
+  double end_to_end_p95_ms = 0.0;
+  double end_to_end_p99_ms = 0.0;
+};
+
+class SlamDaemon {
+ public:
+  /// Reads every module's configuration; throws ConfigError naming the bad key.
+  SlamDaemon(Config& config, const DaemonOverrides& overrides);
+  ~SlamDaemon();
+  SlamDaemon(const SlamDaemon&) = delete;
+  SlamDaemon& operator=(const SlamDaemon&) = delete;
+
+  /// Runs to completion. Returns kExitOk, kExitSourceError (source cannot be opened),
+  /// kExitOutputError (an output could not be written) or kExitFailure.
+  int run(ShutdownSignals& signals);
+
+  const DaemonSummary& summary() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace slamd

@@ -1,0 +1,498 @@
+#include "slamd/app/slam_daemon.hpp"
+
+#include <atomic>
+#include <chrono>
+#include <mutex>
+
+#include "slamd/app/daemon_config.hpp"
+#include "slamd/app/daemon_messages.hpp"
+#include "slamd/app/pose_estimator.hpp"
+#include "slamd/command_t.hpp"
+#include "slamd/common/log.hpp"
+#include "slamd/common/program_options.hpp"
+#include "slamd/common/trajectory.hpp"
+#include "slamd/comms/channels.hpp"
+#include "slamd/comms/frame_codec.hpp"
+#include "slamd/comms/lcm_bus.hpp"
+#include "slamd/comms/map_codec.hpp"
+#include "slamd/comms/pose_codec.hpp"
+#include "slamd/comms/status_codec.hpp"
+#include "slamd/pipeline/pipeline.hpp"
+#include "slamd/mapping/mapper.hpp"
+#include "slamd/sources/source_factory.hpp"
+
+namespace slamd {
+
+namespace {
+constexpr const char* kLog = "slamd";
+constexpr std::size_t kCommandQueueCapacity = 64;
+
+/// A request from the control loop to the mapping thread, which owns the map.
+struct MapRequest {
+  enum class Kind { kSave, kPublish };
+  Kind kind = Kind::kSave;
+  std::string path;  ///< kSave: .bt or .ot
+};
+}  // namespace
+
+struct SlamDaemon::Impl {
+  // --- configuration (read once, on the constructing thread) -------------------------------
+  Config& config;
+  DaemonConfig daemon;
+  ChannelConfig channels;
+  TrackingConfig tracking_config;
+  FilterConfig filter_config;
+  MappingConfig mapping_config;
+  std::unique_ptr<FrameSource> source;
+  /// Owned by the mapping thread while the pipeline runs, by the control thread after it stopped.
+  std::unique_ptr<Mapper> mapper;
+  /// Control loop (producer) -> mapping thread (consumer).
+  SpscQueue<MapRequest> map_requests{16};
+  std::atomic<std::int64_t> map_leaf_voxels{0};
+  std::atomic<std::int64_t> map_occupied_voxels{0};
+
+  // --- control shared with the stages (atomics only) ----------------------------------------
+  std::atomic<bool> paused{false};
+  /// Wakes the capture thread when RESUME (or shutdown) ends a pause.
+  WakeSignal resume_signal;
+  /// Live frames read and thrown away while paused.
+  std::atomic<std::uint64_t> frames_dropped_paused{0};
+  /// Incremented by RESET; each stage resets when it sees a new value.
+  std::atomic<std::uint64_t> reset_generation{0};
+  std::atomic<int> tracking_state{static_cast<int>(TrackingState::kNotInitialized)};
+
+  /// Commands from the LCM receive thread (producer) to the control loop (consumer).
+  SpscQueue<slamd::command_t> commands{kCommandQueueCapacity};
+  std::atomic<std::uint64_t> commands_dropped{0};
+
+  /// Capture-to-publication latency, recorded by the publish thread.
+  LatencyHistogram end_to_end;
+
+  // --- owned by the publish thread while running, by the control thread after stop ----------
+  Trajectory trajectory;
+
+  DaemonSummary summary;
+
+  Impl(Config& c, const DaemonOverrides& overrides) : config(c) {
+    daemon = DaemonConfig::load(config);
+    if (!overrides.source.empty()) daemon.source = overrides.source;
+    if (!overrides.trajectory_out.empty()) daemon.trajectory_out = overrides.trajectory_out;
+    if (!overrides.map_out.empty()) daemon.map_out = overrides.map_out;
+    if (!overrides.lcm_url.empty()) config.set("lcm.url", overrides.lcm_url);
+    channels = ChannelConfig::load(config);
+    tracking_config = TrackingConfig::load(config);
+    filter_config = FilterConfig::load(config);
+    mapping_config = MappingConfig::load(config);
+    if (daemon.mapping_enabled) mapper = std::make_unique<Mapper>(mapping_config);
+    // The source reads its own sections (camera.*, capture.*, synthetic.*) now, so that every
+    // configuration error surfaces before anything starts.
+    source = createFrameSource(daemon.source, config);
+  }
+
+  int run(ShutdownSignals& signals);
+  void handleCommands(LcmBus& bus, ShutdownSignals& signals);
+  void publishStatus(LcmBus& bus, StatusBuilder& builder, Pipeline& pipeline, const std::string& note);
+  int writeOutputs();
+  void runMappingStep(LcmBus& bus, const EstimatedPacket& packet, std::uint64_t& reset_seen,
+                      std::int64_t& next_occupancy_count_ns);
+  void serveMapRequest(LcmBus& bus, const MapRequest& request);
+  void publishMapOutputs(LcmBus& bus, const MapperOutputs& outputs);
+};
+
+SlamDaemon::SlamDaemon(Config& config, const DaemonOverrides& overrides)
+    : impl_(std::make_unique<Impl>(config, overrides)) {}
+
+SlamDaemon::~SlamDaemon() = default;
+
+int SlamDaemon::run(ShutdownSignals& signals) { return impl_->run(signals); }
+
+const DaemonSummary& SlamDaemon::summary() const { return impl_->summary; }
+
+void SlamDaemon::Impl::handleCommands(LcmBus& bus, ShutdownSignals& signals) {
+  (void)bus;
+  while (auto command = commands.tryPop()) {
+    switch (command->command) {
+      case slamd::command_t::PAUSE:
+        SLAMD_LOG_INFO(kLog) << "command PAUSE: capture paused";
+        paused.store(true, std::memory_order_release);
+        break;
+      case slamd::command_t::RESUME:
+        SLAMD_LOG_INFO(kLog) << "command RESUME";
+        paused.store(false, std::memory_order_release);
+        resume_signal.notify();
+        break;
+      case slamd::command_t::RESET:
+        SLAMD_LOG_INFO(kLog) << "command RESET: tracking, filter and map start over";
+        reset_generation.fetch_add(1, std::memory_order_acq_rel);
+        break;
+      case slamd::command_t::SHUTDOWN:
+        SLAMD_LOG_INFO(kLog) << "command SHUTDOWN";
+        signals.request();
+        break;
+      case slamd::command_t::SAVE_MAP:
+      case slamd::command_t::PUBLISH_MAP: {
+        if (!mapper) {
+          SLAMD_LOG_WARN(kLog) << "map command ignored: mapping is disabled (mapping.enabled)";
+          break;
+        }
+        MapRequest request;
+        request.kind = command->command == slamd::command_t::SAVE_MAP ? MapRequest::Kind::kSave
+                                                                       : MapRequest::Kind::kPublish;
+        request.path = !command->argument.empty() ? command->argument
+                       : !daemon.map_out.empty()  ? daemon.map_out
+                                                  : daemon.map_save_path;
+        SLAMD_LOG_INFO(kLog) << "command "
+                             << (request.kind == MapRequest::Kind::kSave ? "SAVE_MAP " + request.path
+                                                                         : std::string("PUBLISH_MAP"));
+        if (!map_requests.tryPush(std::move(request))) {
+          SLAMD_LOG_WARN(kLog) << "map command dropped: too many pending map requests";
+        }
+        break;
+      }
+      default:
+        SLAMD_LOG_WARN(kLog) << "unknown command " << static_cast<int>(command->command)
+                             << " ignored";
+        break;
+    }
+  }
+}
+
+void SlamDaemon::Impl::publishStatus(LcmBus& bus, StatusBuilder& builder, Pipeline& pipeline,
+                                     const std::string& note) {
+  StatusExtras extras;
+  const FrameSourceStats source_stats = source->stats();
+  extras.extra_errors["capture"] = source_stats.frames_skipped;
+  extras.extra_drops["capture"] =
+      source_stats.frames_dropped + frames_dropped_paused.load(std::memory_order_relaxed);
+  extras.tracking_state = static_cast<TrackingState>(tracking_state.load(std::memory_order_relaxed));
+  extras.map_occupied_voxels = map_occupied_voxels.load(std::memory_order_relaxed);
+  extras.map_total_voxels = map_leaf_voxels.load(std::memory_order_relaxed);
+  extras.message = note;
+  const std::uint64_t malformed = bus.malformedTotal();
+  if (malformed > 0) {
+    extras.message += (extras.message.empty() ? "" : "; ") + std::to_string(malformed) +
+                      " malformed messages received";
+  }
+  bus.publishMessage(channels.status, builder.build(wallClockUtime(), steadyNowNs(),
+                                                    pipeline.stats(), end_to_end.snapshot(),
+                                                    extras));
+}
+
+int SlamDaemon::Impl::run(ShutdownSignals& signals) {
+  const std::int64_t start_ns = steadyNowNs();
+  try {
+    source->open();
+  } catch (const SourceError& e) {
+    SLAMD_LOG_ERROR(kLog) << "cannot open source '" << daemon.source << "': " << e.what();
+    return kExitSourceError;
+  }
+  SLAMD_LOG_INFO(kLog) << "source: " << source->description()
+                       << (source->isLive() ? " (live: frames are dropped, never queued, when "
+                                              "tracking falls behind)"
+                                            : "");
+  SLAMD_LOG_INFO(kLog) << "stages: capture, tracking (" << frontEndName(tracking_config.frontend)
+                       << "), filter ("
+                       << (filter_config.enabled
+                               ? (filter_config.vanishing_points ? "EKF + vanishing points"
+                                                                 : "EKF, no vanishing points")
+                               : "off: odometry chained")
+                       << "), publish, mapping ("
+                       << (mapper ? (daemon.map_keyframes_only ? "keyframes" : "every frame")
+                                  : "off")
+                       << "); not built yet: back end (issue 10)";
+
+  std::unique_ptr<LcmBus> bus;
+  try {
+    bus = std::make_unique<LcmBus>(channels.lcm_url);
+  } catch (const std::exception& e) {
+    SLAMD_LOG_ERROR(kLog) << e.what();
+    return kExitFailure;
+  }
+  bus->subscribe<slamd::command_t>(channels.command,
+                                   [this](const slamd::command_t& command, Utime) {
+                                     if (!commands.tryPush(command)) {
+                                       commands_dropped.fetch_add(1, std::memory_order_relaxed);
+                                     }
+                                   });
+  bus->startHandling();
+
+  const bool live = source->isLive();
+  // Datasets played as fast as possible wait for slow stages (nothing is lost, runs are
+  // repeatable); live and real-time sources must never be held up, so their frames are dropped
+  // oldest-first and counted.
+  const EdgePolicy capture_policy = live ? EdgePolicy::kDropOldest : EdgePolicy::kBackpressure;
+  const FrameEncodeOptions frame_encoding = [&] {
+    FrameEncodeOptions options;
+    options.color = ColorEncoding::kJpeg;
+    options.jpeg_quality = daemon.frame_jpeg_quality;
+    options.depth = parseDepthEncoding(daemon.frame_depth_encoding);
+    options.depth_scale = 1000.0;
+    return options;
+  }();
+
+  Pipeline pipeline(PipelineMode::kThreaded);
+  std::int64_t last_emit_ns = steadyNowNs();
+  const auto heartbeat_ns = static_cast<std::int64_t>(daemon.heartbeat_period_s * 1e9);
+  auto captured = pipeline.addSource<CapturePacket>("capture", [&]() -> SourceStep<CapturePacket> {
+    if (paused.load(std::memory_order_acquire) && !live) {
+      // A recording simply waits; a live source keeps being read (below) so that resuming
+      // continues from the present, not from a stale buffered frame.
+      const auto seen = resume_signal.epoch();
+      if (paused.load(std::memory_order_acquire) && steadyNowNs() - last_emit_ns < heartbeat_ns) {
+        resume_signal.waitFor(seen, std::chrono::steady_clock::now() +
+                                        std::chrono::nanoseconds(heartbeat_ns));
+        return SourceStep<CapturePacket>::idle();
+      }
+      last_emit_ns = steadyNowNs();
+      return SourceStep<CapturePacket>::of(CapturePacket{});
+    }
+    FrameRead read = source->next(std::chrono::milliseconds(100));
+    if (read.status == FrameRead::Status::kEndOfStream) return SourceStep<CapturePacket>::end();
+    if (read.status == FrameRead::Status::kFrame && paused.load(std::memory_order_acquire)) {
+      frames_dropped_paused.fetch_add(1, std::memory_order_relaxed);
+    } else if (read.status == FrameRead::Status::kFrame) {
+      auto frame = std::make_shared<RgbdFrame>(*read.frame);  // shallow: images are shared
+      if (frame->received_steady_ns == 0) frame->received_steady_ns = steadyNowNs();
+      ensureGray(*frame);
+      if (daemon.publish_frames) {
+        bus->publishMessage(channels.frames, encodeRgbdFrame(*frame, frame_encoding));
+      }
+      last_emit_ns = steadyNowNs();
+      return SourceStep<CapturePacket>::of(CapturePacket{std::move(frame)});
+    }
+    if (steadyNowNs() - last_emit_ns >= heartbeat_ns) {
+      last_emit_ns = steadyNowNs();
+      return SourceStep<CapturePacket>::of(CapturePacket{});
+    }
+    return SourceStep<CapturePacket>::idle();
+  });
+
+  VisualOdometry odometry(tracking_config);
+  std::uint64_t tracking_reset_seen = 0;
+  auto tracked = pipeline.addStage<CapturePacket, TrackedPacket>(
+      "tracking", captured, {static_cast<std::size_t>(daemon.tracking_queue), capture_policy},
+      [&](CapturePacket packet) -> std::optional<TrackedPacket> {
+        const auto generation = reset_generation.load(std::memory_order_acquire);
+        if (generation != tracking_reset_seen) {
+          odometry.reset();
+          tracking_reset_seen = generation;
+        }
+        TrackedPacket out;
+        out.frame = std::move(packet.frame);
+        if (out.frame) {
+          out.odometry = odometry.processFrame(out.frame);
+          tracking_state.store(static_cast<int>(out.odometry->tracking_state),
+                               std::memory_order_relaxed);
+        }
+        return out;
+      });
+
+  PoseEstimator estimator(filter_config);
+  std::uint64_t filter_reset_seen = 0;
+  auto estimated = pipeline.addStage<TrackedPacket, EstimatedPacket>(
+      "filter", tracked, {static_cast<std::size_t>(daemon.filter_queue), EdgePolicy::kBackpressure},
+      [&](TrackedPacket packet) -> std::optional<EstimatedPacket> {
+        const auto generation = reset_generation.load(std::memory_order_acquire);
+        if (generation != filter_reset_seen) {
+          estimator.reset();
+          filter_reset_seen = generation;
+        }
+        return estimator.process(std::move(packet));
+      });
+
+  pipeline.addSink<EstimatedPacket>(
+      "publish", estimated,
+      {static_cast<std::size_t>(daemon.publish_queue), EdgePolicy::kBackpressure},
+      [&](EstimatedPacket packet) {
+        if (!packet.frame || !packet.odometry) return;
+        PoseEstimate pose = packet.pose;
+        pose.parent_frame = daemon.world_frame;
+        pose.child_frame = daemon.camera_frame;
+        bus->publishMessage(channels.pose, toPoseMessage(pose));
+        bus->publishMessage(channels.bot_pose, toBotCorePose(pose));
+        end_to_end.recordNs(steadyNowNs() - packet.frame->received_steady_ns);
+        bus->publishMessage(channels.odometry, toOdometryMessage(*packet.odometry));
+        if (packet.vanishing_point) {
+          bus->publishMessage(channels.vanishing_point,
+                              toVanishingPointMessage(pose.utime, *packet.vanishing_point));
+        }
+        if (pose.tracking_state != TrackingState::kLost) {
+          trajectory.push_back(StampedPose{utimeToSeconds(pose.utime), pose.T_world_camera});
+        }
+      });
+
+  std::uint64_t mapping_reset_seen = 0;
+  std::int64_t next_occupancy_count_ns = 0;
+  if (mapper) {
+    pipeline.addSink<EstimatedPacket>(
+        "mapping", estimated,
+        {static_cast<std::size_t>(daemon.mapping_queue),
+         live ? EdgePolicy::kDrainToNewest : EdgePolicy::kBackpressure},
+        [&](EstimatedPacket packet) { runMappingStep(*bus, packet, mapping_reset_seen,
+                                                     next_occupancy_count_ns); });
+  }
+
+  StatusBuilder status_builder;
+  pipeline.start();
+  SLAMD_LOG_INFO(kLog) << "running; LCM " << (channels.lcm_url.empty() ? "<default URL>" : channels.lcm_url)
+                       << ", poses on " << channels.pose << ", status on " << channels.status
+                       << ", commands on " << channels.command;
+  const auto status_period_ns = static_cast<std::int64_t>(daemon.status_period_s * 1e9);
+  std::int64_t next_status_ns = steadyNowNs() + status_period_ns;
+  std::string stop_reason = "end of input";
+  while (true) {
+    if (signals.waitFor(std::chrono::milliseconds(20))) {
+      stop_reason = signals.signalNumber() ? "signal " + std::to_string(signals.signalNumber())
+                                           : "SHUTDOWN command";
+      break;
+    }
+    handleCommands(*bus, signals);
+    if (steadyNowNs() >= next_status_ns) {
+      publishStatus(*bus, status_builder, pipeline, paused.load() ? "paused" : "");
+      next_status_ns += status_period_ns;
+    }
+    if (pipeline.waitUntilFinished(std::chrono::steady_clock::now())) break;
+  }
+  SLAMD_LOG_INFO(kLog) << "stopping (" << stop_reason << "): draining queued frames";
+  paused.store(false, std::memory_order_release);
+  resume_signal.notify();
+  const StopReport stop = pipeline.stop(std::chrono::milliseconds(
+      static_cast<std::int64_t>(daemon.drain_deadline_s * 1000.0)));
+  if (!stop.drained) {
+    SLAMD_LOG_WARN(kLog) << "drain deadline passed; " << stop.discarded << " frames discarded";
+  }
+  source->close();
+  publishStatus(*bus, status_builder, pipeline, "stopped: " + stop_reason);
+  bus->stopHandling();
+
+  // Summary (the pipeline's threads are joined: their counters are final).
+  const auto stats = pipeline.stats();
+  summary.frames_captured = stats[0].processed;
+  summary.frames_tracked = stats[1].processed;
+  summary.poses_published = stats[3].processed;
+  if (mapper) summary.frames_mapped = static_cast<std::uint64_t>(mapper->stats().frames_integrated);
+  // The mapping thread has stopped: map requests that arrived during the drain are served here.
+  while (auto request = map_requests.tryPop()) serveMapRequest(*bus, *request);
+  for (const auto& stage : stats) {
+    summary.errors += stage.errors;
+    for (const auto& edge : stage.inputs) summary.drops += edge.dropped + edge.discarded;
+  }
+  const FrameSourceStats source_stats = source->stats();
+  summary.errors += source_stats.frames_skipped;
+  summary.drops += source_stats.frames_dropped + frames_dropped_paused.load() +
+                   commands_dropped.load();
+  summary.malformed_commands = bus->malformedCount(channels.command);
+  summary.duration_s = static_cast<double>(steadyNowNs() - start_ns) * 1e-9;
+  const LatencySummary latency = end_to_end.summary();
+  summary.end_to_end_p50_ms = latency.p50_ms;
+  summary.end_to_end_p95_ms = latency.p95_ms;
+  summary.end_to_end_p99_ms = latency.p99_ms;
+  SLAMD_LOG_INFO(kLog) << "frames: " << summary.frames_captured << " captured, "
+                       << summary.frames_tracked << " tracked, " << summary.poses_published
+                       << " poses published; " << summary.drops << " dropped, " << summary.errors
+                       << " errors, " << bus->malformedTotal() << " malformed messages; "
+                       << summary.duration_s << " s; capture-to-pose latency p50 "
+                       << latency.p50_ms << " ms, p95 " << latency.p95_ms << " ms, p99 "
+                       << latency.p99_ms << " ms";
+  return writeOutputs();
+}
+
+void SlamDaemon::Impl::publishMapOutputs(LcmBus& bus, const MapperOutputs& outputs) {
+  if (outputs.update && !outputs.update->voxels.empty()) {
+    bus.publishMessage(channels.map_update, toMapUpdateMessage(*outputs.update));
+  }
+  if (outputs.full_map) bus.publishMessage(channels.map, toFullMapMessage(*outputs.full_map));
+  if (outputs.snapshot && !outputs.snapshot->ok) {
+    SLAMD_LOG_WARN(kLog) << "map snapshot failed: " << outputs.snapshot->error;
+  }
+}
+
+void SlamDaemon::Impl::serveMapRequest(LcmBus& bus, const MapRequest& request) {
+  if (request.kind == MapRequest::Kind::kPublish) {
+    bus.publishMessage(channels.map, toFullMapMessage(mapper->fullMap()));
+    return;
+  }
+  const MapFileResult saved = mapper->saveMap(request.path);
+  if (saved.ok) {
+    SLAMD_LOG_INFO(kLog) << "SAVE_MAP: map written to " << saved.path;
+  } else {
+    SLAMD_LOG_ERROR(kLog) << "SAVE_MAP failed: " << saved.error;
+  }
+}
+
+void SlamDaemon::Impl::runMappingStep(LcmBus& bus, const EstimatedPacket& packet,
+                                      std::uint64_t& reset_seen,
+                                      std::int64_t& next_occupancy_count_ns) {
+  const auto generation = reset_generation.load(std::memory_order_acquire);
+  if (generation != reset_seen) {
+    mapper->reset();
+    reset_seen = generation;
+  }
+  while (auto request = map_requests.tryPop()) serveMapRequest(bus, *request);
+  if (packet.frame && packet.odometry &&
+      packet.pose.tracking_state != TrackingState::kLost &&
+      packet.pose.tracking_state != TrackingState::kNotInitialized &&
+      (!daemon.map_keyframes_only || packet.odometry->is_keyframe)) {
+    std::optional<std::int64_t> keyframe_id;
+    if (packet.odometry->is_keyframe && packet.odometry->keyframe) {
+      keyframe_id = packet.odometry->keyframe->id;
+    }
+    const IntegrationResult result =
+        mapper->integrate(*packet.frame, packet.pose.T_world_camera, keyframe_id);
+    if (result.status == IntegrationStatus::kBadFrame ||
+        result.status == IntegrationStatus::kBadPose) {
+      // The pipeline counts a thrown error against this stage and carries on.
+      throw std::runtime_error("frame not mapped: " + result.error);
+    }
+  }
+  publishMapOutputs(bus, mapper->poll(mapper->latestUtime()));
+  map_leaf_voxels.store(static_cast<std::int64_t>(mapper->numLeafNodes()),
+                        std::memory_order_relaxed);
+  // Counting occupied voxels walks the tree: once a second is plenty for the status channel.
+  if (steadyNowNs() >= next_occupancy_count_ns) {
+    auto count_occupied = [](const auto* tree) {
+      std::int64_t occupied = 0;
+      for (auto it = tree->begin_leafs(); it != tree->end_leafs(); ++it) {
+        if (tree->isNodeOccupied(*it)) ++occupied;
+      }
+      return occupied;
+    };
+    map_occupied_voxels.store(mapper->hasColor() ? count_occupied(mapper->colorOcTree())
+                                                 : count_occupied(mapper->ocTree()),
+                              std::memory_order_relaxed);
+    next_occupancy_count_ns = steadyNowNs() + 1'000'000'000;
+  }
+}
+
+int SlamDaemon::Impl::writeOutputs() {
+  int exit_code = kExitOk;
+  if (!daemon.trajectory_out.empty()) {
+    try {
+      writeTumTrajectory(daemon.trajectory_out, trajectory,
+                         "slamd trajectory (T_world_camera), source " + daemon.source);
+      SLAMD_LOG_INFO(kLog) << "trajectory: " << trajectory.size() << " poses written to "
+                           << daemon.trajectory_out;
+    } catch (const std::exception& e) {
+      SLAMD_LOG_ERROR(kLog) << e.what();
+      exit_code = kExitOutputError;
+    }
+  }
+  if (!daemon.map_out.empty()) {
+    if (!mapper) {
+      SLAMD_LOG_WARN(kLog) << "--map-out " << daemon.map_out
+                           << " not written: mapping is disabled (mapping.enabled)";
+    } else {
+      const MapFileResult saved = mapper->saveMap(daemon.map_out);
+      if (saved.ok) {
+        SLAMD_LOG_INFO(kLog) << "map: " << mapper->numLeafNodes() << " voxels written to "
+                             << saved.path;
+      } else {
+        SLAMD_LOG_ERROR(kLog) << "map not saved: " << saved.error;
+        exit_code = kExitOutputError;
+      }
+    }
+  }
+  return exit_code;
+}
+
+}  // namespace slamd
