@@ -1,0 +1,98 @@
+#pragma once
+// OpenNi2Source: frames from an OpenNI2 device (`openni2` or `openni2:URI`, e.g. a Kinect v1 or
+// an Asus Xtion) or from an .oni recording (`oni:FILE`).
+//
+//   OpenNi2Source camera(OpenNi2Source::Kind::kDevice, "", OpenNi2Config::load(config));
+//   camera.open();            // throws SourceError: no device, no depth sensor, ...
+//   FrameRead read = camera.next(100ms);
+//
+// Device: the first device (empty URI) or the named one; depth and colour streams in the
+// configured mode (default 640x480 at 30 Hz; when the device lacks it, its default mode is used
+// and a warning lists the modes it offers); depth registered to colour and frame sync enabled
+// where the device supports them; mirroring off; depth in millimetres (or 100 um units, scaled
+// accordingly). Colour and depth frames are paired by timestamp (at most half a frame period
+// apart); a device without a colour sensor gives depth-only frames. Frame utime: the device
+// clock anchored to the wall clock at the first frame, so frame spacing is the device's.
+// A device that delivers no frame for capture.openni2.frame_timeout_s, or whose wait fails, is
+// reported disconnected, closed and reopened with exponential backoff (counted in
+// stats().reconnects); next() keeps returning kTimeout meanwhile and never blocks longer than its
+// timeout.
+//
+// Recording: played once (no repeat), as fast as frames are read (OpenNI's manual speed) or in
+// real time (capture.oni.realtime); the end of the file is kEndOfStream. Frame utime is the
+// recorded device timestamp (microseconds from the recording's start), so replays are
+// reproducible.
+//
+// Intrinsics: from camera.* (scaled when the stream size differs from camera.width/height), or
+// from the device's fields of view when capture.openni2.intrinsics = device.
+//
+// OpenNI2 is initialised once per process and never shut down: Debian's DummyDevice driver
+// crashes in OpenNI::shutdown(), and drivers are process-wide anyway. One owner thread.
+
+#include <chrono>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "slamd/capture/camera_config.hpp"
+#include "slamd/capture/frame_source.hpp"
+#include "slamd/capture/source_support.hpp"
+
+namespace slamd {
+
+struct OpenNi2Config {
+  CameraConfig camera;                 ///< camera.* (depth_scale comes from the pixel format)
+  bool intrinsics_from_device = false; ///< capture.openni2.intrinsics: config|device
+  int width = 640;                     ///< capture.openni2.width, pixels, 1..4096
+  int height = 480;                    ///< capture.openni2.height, pixels, 1..4096
+  int fps = 30;                        ///< capture.openni2.fps, 1..120
+  bool registration = true;            ///< capture.openni2.registration (depth to colour)
+  bool sync = true;                    ///< capture.openni2.sync (depth/colour frame sync)
+  bool color = true;                   ///< capture.openni2.color (false: depth only)
+  double frame_timeout_s = 2.0;        ///< capture.openni2.frame_timeout_s, (0, 60]
+  double reconnect_initial_s = 0.5;    ///< capture.openni2.reconnect_initial_s, (0, 60]
+  double reconnect_max_s = 8.0;        ///< capture.openni2.reconnect_max_s, (0, 600]
+  bool oni_realtime = false;           ///< capture.oni.realtime
+
+  static OpenNi2Config load(Config& config);
+};
+
+/// Names OpenNI2 devices currently attached (URI and name), for messages and tools.
+std::vector<std::string> listOpenNi2Devices();
+
+/// Writes an .oni recording of `frame_count` frame pairs from an OpenNI2 device (used by tests
+/// with the DummyDevice, and by tools). Throws SourceError.
+void recordOni(const std::string& device_uri, const std::string& path, int frame_count);
+
+class OpenNi2Source : public FrameSource {
+ public:
+  enum class Kind { kDevice, kFile };
+
+  OpenNi2Source(Kind kind, std::string uri, OpenNi2Config config);
+  ~OpenNi2Source() override;
+  OpenNi2Source(const OpenNi2Source&) = delete;
+  OpenNi2Source& operator=(const OpenNi2Source&) = delete;
+
+  void open() override;
+  FrameRead next(std::chrono::milliseconds timeout) override;
+  void close() override;
+  FrameSourceStats stats() const override { return counters_.snapshot(); }
+  std::string description() const override;
+  bool isLive() const override { return kind_ == Kind::kDevice; }
+  std::optional<CameraIntrinsics> intrinsics() const override;
+
+  /// Recordings: depth frames the file holds (from its index), after open(); -1 for devices.
+  int recordedDepthFrames() const;
+
+  struct Impl;  ///< opaque: OpenNI2 types stay out of this header
+
+ private:
+  Kind kind_;
+  std::string uri_;
+  OpenNi2Config config_;
+  std::unique_ptr<Impl> impl_;
+  SourceCounters counters_;
+  FrameGate gate_;
+};
+
+}  // namespace slamd

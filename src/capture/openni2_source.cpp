@@ -1,0 +1,557 @@
+#include "slamd/capture/openni2_source.hpp"
+
+#include <OpenNI.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <mutex>
+#include <sstream>
+#include <thread>
+
+#include <opencv2/imgproc.hpp>
+
+#include "slamd/common/log.hpp"
+
+namespace slamd {
+
+namespace {
+
+constexpr const char* kComponent = "capture.openni2";
+
+// Debian's DummyDevice driver does not join its frame thread in stop(): destroying a stream right
+// after stopping it lets that thread touch freed memory (a crash seen here about one run in
+// three). Waiting a few frame periods lets the thread see the stop flag. A shutdown-only cost.
+void waitForDriverThreads() { std::this_thread::sleep_for(std::chrono::milliseconds(100)); }
+
+// OpenNI2 is process-wide: initialised on first use, never shut down (see the header).
+void ensureOpenNi() {
+  static std::once_flag once;
+  static std::string error;
+  std::call_once(once, [] {
+    if (openni::OpenNI::initialize() != openni::STATUS_OK) {
+      error = std::string("OpenNI2 initialisation failed: ") +
+              openni::OpenNI::getExtendedError();
+    }
+  });
+  if (!error.empty()) throw SourceError(error);
+}
+
+std::string lastError() {
+  const char* text = openni::OpenNI::getExtendedError();
+  return (text != nullptr && *text != '\0') ? std::string(" (") + text + ")" : std::string();
+}
+
+const char* pixelFormatName(openni::PixelFormat format) {
+  switch (format) {
+    case openni::PIXEL_FORMAT_DEPTH_1_MM:
+      return "DEPTH_1_MM";
+    case openni::PIXEL_FORMAT_DEPTH_100_UM:
+      return "DEPTH_100_UM";
+    case openni::PIXEL_FORMAT_SHIFT_9_2:
+      return "SHIFT_9_2";
+    case openni::PIXEL_FORMAT_SHIFT_9_3:
+      return "SHIFT_9_3";
+    case openni::PIXEL_FORMAT_RGB888:
+      return "RGB888";
+    case openni::PIXEL_FORMAT_YUV422:
+      return "YUV422";
+    case openni::PIXEL_FORMAT_GRAY8:
+      return "GRAY8";
+    case openni::PIXEL_FORMAT_GRAY16:
+      return "GRAY16";
+    case openni::PIXEL_FORMAT_JPEG:
+      return "JPEG";
+    case openni::PIXEL_FORMAT_YUYV:
+      return "YUYV";
+  }
+  return "unknown";
+}
+
+std::string modeText(const openni::VideoMode& mode) {
+  std::ostringstream out;
+  out << mode.getResolutionX() << "x" << mode.getResolutionY() << "@" << mode.getFps() << " "
+      << pixelFormatName(mode.getPixelFormat());
+  return out.str();
+}
+
+bool isDepthFormat(openni::PixelFormat f) {
+  return f == openni::PIXEL_FORMAT_DEPTH_1_MM || f == openni::PIXEL_FORMAT_DEPTH_100_UM;
+}
+
+bool isColorFormat(openni::PixelFormat f) {
+  return f == openni::PIXEL_FORMAT_RGB888 || f == openni::PIXEL_FORMAT_GRAY8;
+}
+
+// Picks the configured mode among the sensor's, preferring the wanted pixel formats; returns
+// false (and lists what is offered) when no mode matches the size and rate.
+bool selectMode(const openni::SensorInfo& info, int width, int height, int fps, bool depth,
+                openni::VideoMode& chosen, std::string& offered) {
+  const auto& modes = info.getSupportedVideoModes();
+  bool found = false;
+  for (int i = 0; i < modes.getSize(); ++i) {
+    const openni::VideoMode& m = modes[i];
+    offered += (offered.empty() ? "" : ", ") + modeText(m);
+    const bool usable = depth ? isDepthFormat(m.getPixelFormat()) : isColorFormat(m.getPixelFormat());
+    if (!found && usable && m.getResolutionX() == width && m.getResolutionY() == height &&
+        m.getFps() == fps) {
+      chosen = m;
+      found = true;
+    }
+    // Prefer millimetres and RGB when several formats share the size.
+    if (found && m.getResolutionX() == width && m.getResolutionY() == height &&
+        m.getFps() == fps &&
+        (m.getPixelFormat() == openni::PIXEL_FORMAT_DEPTH_1_MM ||
+         m.getPixelFormat() == openni::PIXEL_FORMAT_RGB888)) {
+      chosen = m;
+    }
+  }
+  return found;
+}
+
+}  // namespace
+
+OpenNi2Config OpenNi2Config::load(Config& config) {
+  OpenNi2Config out;
+  out.camera = CameraConfig::load(config, 1000.0);
+  out.intrinsics_from_device =
+      config.getChoice("capture.openni2.intrinsics", "config", {"config", "device"}) == "device";
+  out.width = config.getInt("capture.openni2.width", out.width, 1, 4096);
+  out.height = config.getInt("capture.openni2.height", out.height, 1, 4096);
+  out.fps = config.getInt("capture.openni2.fps", out.fps, 1, 120);
+  out.registration = config.getBool("capture.openni2.registration", out.registration);
+  out.sync = config.getBool("capture.openni2.sync", out.sync);
+  out.color = config.getBool("capture.openni2.color", out.color);
+  out.frame_timeout_s =
+      config.getDouble("capture.openni2.frame_timeout_s", out.frame_timeout_s, 1e-3, 60.0);
+  out.reconnect_initial_s =
+      config.getDouble("capture.openni2.reconnect_initial_s", out.reconnect_initial_s, 1e-3, 60.0);
+  out.reconnect_max_s =
+      config.getDouble("capture.openni2.reconnect_max_s", out.reconnect_max_s, 1e-3, 600.0);
+  out.oni_realtime = config.getBool("capture.oni.realtime", out.oni_realtime);
+  return out;
+}
+
+std::vector<std::string> listOpenNi2Devices() {
+  ensureOpenNi();
+  openni::Array<openni::DeviceInfo> devices;
+  openni::OpenNI::enumerateDevices(&devices);
+  std::vector<std::string> out;
+  for (int i = 0; i < devices.getSize(); ++i) {
+    out.push_back(std::string(devices[i].getUri()) + " (" + devices[i].getVendor() + " " +
+                  devices[i].getName() + ")");
+  }
+  return out;
+}
+
+void recordOni(const std::string& device_uri, const std::string& path, int frame_count) {
+  ensureOpenNi();
+  openni::Device device;
+  if (device.open(device_uri.empty() ? openni::ANY_DEVICE : device_uri.c_str()) !=
+      openni::STATUS_OK) {
+    throw SourceError("cannot open OpenNI2 device '" + device_uri + "'" + lastError());
+  }
+  openni::VideoStream depth;
+  openni::VideoStream color;
+  if (depth.create(device, openni::SENSOR_DEPTH) != openni::STATUS_OK) {
+    throw SourceError("device '" + device_uri + "' has no depth sensor" + lastError());
+  }
+  const bool has_color = device.hasSensor(openni::SENSOR_COLOR) &&
+                         color.create(device, openni::SENSOR_COLOR) == openni::STATUS_OK;
+  openni::Recorder recorder;
+  if (recorder.create(path.c_str()) != openni::STATUS_OK ||
+      recorder.attach(depth, false) != openni::STATUS_OK ||
+      (has_color && recorder.attach(color, false) != openni::STATUS_OK)) {
+    throw SourceError("cannot record to " + path + lastError());
+  }
+  depth.start();
+  if (has_color) color.start();
+  recorder.start();
+  int depth_frames = 0;
+  int color_frames = 0;
+  int waits = 0;
+  while ((depth_frames < frame_count || (has_color && color_frames < frame_count)) &&
+         waits < frame_count * 8) {
+    ++waits;
+    openni::VideoStream* streams[2] = {&depth, &color};
+    int index = -1;
+    if (openni::OpenNI::waitForAnyStream(streams, has_color ? 2 : 1, &index, 2000) !=
+        openni::STATUS_OK) {
+      break;
+    }
+    openni::VideoFrameRef frame;
+    streams[index]->readFrame(&frame);
+    (index == 0 ? depth_frames : color_frames) += 1;
+  }
+  recorder.stop();
+  recorder.destroy();
+  depth.stop();
+  if (has_color) color.stop();
+  waitForDriverThreads();
+  depth.destroy();
+  if (has_color) color.destroy();
+  device.close();
+  if (depth_frames < frame_count) {
+    throw SourceError("recording " + path + ": device delivered only " +
+                      std::to_string(depth_frames) + " of " + std::to_string(frame_count) +
+                      " depth frames");
+  }
+}
+
+struct OpenNi2Source::Impl {
+  openni::Device device;
+  openni::VideoStream depth;
+  openni::VideoStream color;
+  bool has_color = false;
+  bool opened = false;
+  double depth_scale = 1000.0;  // raw units per metre, from the depth pixel format
+  int depth_frames_total = -1;  // recordings: frames in the file per stream
+  int color_frames_total = -1;
+  int last_depth_index = -1;
+  int last_color_index = -1;
+  openni::VideoFrameRef pending_depth;
+  openni::VideoFrameRef pending_color;
+  CameraIntrinsics device_intrinsics;
+  // Live devices: device clock -> wall clock.
+  bool clock_anchored = false;
+  std::uint64_t first_device_us = 0;
+  Utime first_wall_utime = 0;
+  // Disconnect handling.
+  std::chrono::steady_clock::time_point last_frame_time;
+  bool disconnected = false;
+  std::chrono::steady_clock::time_point reopen_at;
+  double backoff_s = 0.0;
+
+  void closeAll() {
+    pending_depth.release();
+    pending_color.release();
+    const bool running = depth.isValid() || color.isValid();
+    if (depth.isValid()) depth.stop();
+    if (color.isValid()) color.stop();
+    if (running) waitForDriverThreads();
+    if (depth.isValid()) depth.destroy();
+    if (color.isValid()) color.destroy();
+    if (opened) device.close();
+    opened = false;
+  }
+};
+
+OpenNi2Source::OpenNi2Source(Kind kind, std::string uri, OpenNi2Config config)
+    : kind_(kind), uri_(std::move(uri)), config_(std::move(config)),
+      impl_(std::make_unique<Impl>()) {}
+
+OpenNi2Source::~OpenNi2Source() { close(); }
+
+namespace {
+
+// Opens device, streams and options; throws SourceError. Shared by open() and reconnects.
+void openDevice(OpenNi2Source::Kind kind, const std::string& uri, const OpenNi2Config& config,
+                OpenNi2Source::Impl& s);
+
+}  // namespace
+
+void OpenNi2Source::open() {
+  ensureOpenNi();
+  impl_->closeAll();
+  openDevice(kind_, uri_, config_, *impl_);
+  gate_.reset();
+  impl_->disconnected = false;
+  impl_->backoff_s = config_.reconnect_initial_s;
+  SLAMD_LOG_INFO(kComponent) << "opened " << description();
+}
+
+namespace {
+
+void openDevice(OpenNi2Source::Kind kind, const std::string& uri, const OpenNi2Config& config,
+                OpenNi2Source::Impl& s) {
+  const char* what = kind == OpenNi2Source::Kind::kFile ? "recording" : "device";
+  const char* open_uri = uri.empty() ? openni::ANY_DEVICE : uri.c_str();
+  if (s.device.open(open_uri) != openni::STATUS_OK) {
+    std::string hint;
+    if (kind == OpenNi2Source::Kind::kDevice) {
+      const auto devices = listOpenNi2Devices();
+      hint = devices.empty() ? "; no OpenNI2 device is attached (check USB and udev permissions)"
+                             : "; attached: " + devices.front();
+    }
+    throw SourceError(std::string("cannot open OpenNI2 ") + what + " '" +
+                      (uri.empty() ? "first device" : uri) + "'" + lastError() + hint);
+  }
+  s.opened = true;
+  if (s.depth.create(s.device, openni::SENSOR_DEPTH) != openni::STATUS_OK) {
+    s.closeAll();
+    throw SourceError(std::string("OpenNI2 ") + what + " '" + uri + "' has no depth stream" +
+                      lastError());
+  }
+  s.has_color = config.color && s.device.hasSensor(openni::SENSOR_COLOR) &&
+                s.color.create(s.device, openni::SENSOR_COLOR) == openni::STATUS_OK;
+
+  if (kind == OpenNi2Source::Kind::kDevice) {
+    openni::VideoMode mode;
+    std::string offered;
+    if (selectMode(*s.device.getSensorInfo(openni::SENSOR_DEPTH), config.width, config.height,
+                   config.fps, true, mode, offered)) {
+      s.depth.setVideoMode(mode);
+    } else {
+      SLAMD_LOG_WARN(kComponent) << "depth mode " << config.width << "x" << config.height << "@"
+                                 << config.fps << " not offered (" << offered
+                                 << "); using " << modeText(s.depth.getVideoMode());
+    }
+    if (s.has_color) {
+      offered.clear();
+      if (selectMode(*s.device.getSensorInfo(openni::SENSOR_COLOR), config.width, config.height,
+                     config.fps, false, mode, offered)) {
+        s.color.setVideoMode(mode);
+      } else {
+        SLAMD_LOG_WARN(kComponent) << "colour mode " << config.width << "x" << config.height
+                                   << "@" << config.fps << " not offered (" << offered
+                                   << "); using " << modeText(s.color.getVideoMode());
+      }
+    }
+    if (s.has_color && config.registration) {
+      if (s.device.isImageRegistrationModeSupported(openni::IMAGE_REGISTRATION_DEPTH_TO_COLOR)) {
+        if (s.device.setImageRegistrationMode(openni::IMAGE_REGISTRATION_DEPTH_TO_COLOR) !=
+            openni::STATUS_OK) {
+          SLAMD_LOG_WARN(kComponent) << "depth-to-colour registration failed" << lastError();
+        }
+      } else {
+        SLAMD_LOG_WARN(kComponent) << "device does not register depth to colour: depth and "
+                                      "colour pixels will not line up exactly";
+      }
+    }
+    if (s.has_color && config.sync && s.device.setDepthColorSyncEnabled(true) != openni::STATUS_OK) {
+      SLAMD_LOG_WARN(kComponent) << "depth/colour frame sync not supported; pairing by timestamp";
+    }
+    if (s.depth.setMirroringEnabled(false) != openni::STATUS_OK ||
+        (s.has_color && s.color.setMirroringEnabled(false) != openni::STATUS_OK)) {
+      SLAMD_LOG_DEBUG(kComponent) << "mirroring cannot be switched (device default kept)";
+    }
+  } else {
+    openni::PlaybackControl* playback = s.device.getPlaybackControl();
+    if (playback != nullptr) {
+      playback->setRepeatEnabled(false);
+      // -1: manual, a new frame only when the previous one was read (nothing lost).
+      playback->setSpeed(config.oni_realtime ? 1.0f : -1.0f);
+      s.depth_frames_total = playback->getNumberOfFrames(s.depth);
+      s.color_frames_total = s.has_color ? playback->getNumberOfFrames(s.color) : -1;
+    }
+  }
+
+  const openni::PixelFormat depth_format = s.depth.getVideoMode().getPixelFormat();
+  if (!isDepthFormat(depth_format)) {
+    s.closeAll();
+    throw SourceError(std::string("OpenNI2 ") + what + " '" + uri + "' depth format " +
+                      pixelFormatName(depth_format) + " is not supported (DEPTH_1_MM or " +
+                      "DEPTH_100_UM)");
+  }
+  s.depth_scale = depth_format == openni::PIXEL_FORMAT_DEPTH_100_UM ? 10000.0 : 1000.0;
+
+  if (s.depth.start() != openni::STATUS_OK) {
+    s.closeAll();
+    throw SourceError(std::string("cannot start depth stream of '") + uri + "'" + lastError());
+  }
+  if (s.has_color && s.color.start() != openni::STATUS_OK) {
+    SLAMD_LOG_WARN(kComponent) << "colour stream failed to start" << lastError()
+                               << "; depth only";
+    s.color.destroy();
+    s.has_color = false;
+  }
+
+  const openni::VideoMode mode = s.depth.getVideoMode();
+  CameraIntrinsics& k = s.device_intrinsics;
+  k = config.camera.intrinsics;
+  const float hfov = s.has_color ? s.color.getHorizontalFieldOfView() : s.depth.getHorizontalFieldOfView();
+  const float vfov = s.has_color ? s.color.getVerticalFieldOfView() : s.depth.getVerticalFieldOfView();
+  if (config.intrinsics_from_device && hfov > 0.0f && vfov > 0.0f) {
+    k.width = mode.getResolutionX();
+    k.height = mode.getResolutionY();
+    k.fx = k.width / (2.0 * std::tan(static_cast<double>(hfov) / 2.0));
+    k.fy = k.height / (2.0 * std::tan(static_cast<double>(vfov) / 2.0));
+    k.cx = (k.width - 1) / 2.0;
+    k.cy = (k.height - 1) / 2.0;
+    k.distortion_model = DistortionModel::kNone;
+    k.distortion = {};
+  } else if (mode.getResolutionX() != k.width || mode.getResolutionY() != k.height) {
+    k = k.scaled(mode.getResolutionX(), mode.getResolutionY());
+  }
+  s.last_depth_index = -1;
+  s.last_color_index = -1;
+  s.clock_anchored = false;
+  s.last_frame_time = std::chrono::steady_clock::now();
+}
+
+}  // namespace
+
+std::optional<CameraIntrinsics> OpenNi2Source::intrinsics() const {
+  if (!impl_->opened) return std::nullopt;
+  return impl_->device_intrinsics;
+}
+
+int OpenNi2Source::recordedDepthFrames() const { return impl_->depth_frames_total; }
+
+void OpenNi2Source::close() {
+  if (impl_) impl_->closeAll();
+}
+
+std::string OpenNi2Source::description() const {
+  if (kind_ == Kind::kFile) return "oni:" + uri_;
+  return "openni2:" + (uri_.empty() ? std::string("first device") : uri_);
+}
+
+FrameRead OpenNi2Source::next(std::chrono::milliseconds timeout) {
+  Impl& s = *impl_;
+  const auto deadline = std::chrono::steady_clock::now() + timeout;
+  const FrameRead timed_out{FrameRead::Status::kTimeout, {}, {}};
+
+  if (s.disconnected) {
+    const auto now = std::chrono::steady_clock::now();
+    if (now < s.reopen_at) {
+      // Backoff wait (bounded by the caller's timeout), not synchronisation.
+      std::this_thread::sleep_until(std::min(s.reopen_at, deadline));
+      return timed_out;
+    }
+    try {
+      openDevice(kind_, uri_, config_, s);
+      s.disconnected = false;
+      s.backoff_s = config_.reconnect_initial_s;
+      counters_.reconnected();
+      SLAMD_LOG_INFO(kComponent) << "reopened " << description();
+    } catch (const SourceError& e) {
+      s.backoff_s = std::min(s.backoff_s * 2.0, config_.reconnect_max_s);
+      s.reopen_at = std::chrono::steady_clock::now() +
+                    std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+                        std::chrono::duration<double>(s.backoff_s));
+      counters_.failure(kComponent, std::string("reconnect failed: ") + e.what() +
+                                        "; next attempt in " + std::to_string(s.backoff_s) + " s");
+      return timed_out;
+    }
+  }
+
+  const auto frame_timeout = std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+      std::chrono::duration<double>(config_.frame_timeout_s));
+  auto reachedEnd = [&] {
+    if (kind_ != Kind::kFile || s.depth_frames_total < 0) return false;
+    const bool depth_done = s.last_depth_index >= s.depth_frames_total;
+    const bool color_done = !s.has_color || s.last_color_index >= s.color_frames_total;
+    return depth_done && color_done;
+  };
+
+  while (true) {
+    if (reachedEnd() && !s.pending_depth.isValid()) {
+      return FrameRead{FrameRead::Status::kEndOfStream, {}, {}};
+    }
+    const auto now = std::chrono::steady_clock::now();
+    if (now - s.last_frame_time > frame_timeout) {
+      if (kind_ == Kind::kFile) return FrameRead{FrameRead::Status::kEndOfStream, {}, {}};
+      s.closeAll();
+      s.disconnected = true;
+      s.reopen_at = now + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+                              std::chrono::duration<double>(s.backoff_s));
+      counters_.failure(kComponent, description() + ": no frame for " +
+                                        std::to_string(config_.frame_timeout_s) +
+                                        " s, device disconnected; reopening");
+      return timed_out;
+    }
+    if (now >= deadline) return timed_out;
+    const auto remaining_ms = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - now);
+    const auto until_stall_ms = std::chrono::duration_cast<std::chrono::milliseconds>(
+        s.last_frame_time + frame_timeout - now);
+    const int wait_ms = static_cast<int>(
+        std::max<std::int64_t>(1, std::min(remaining_ms.count(), until_stall_ms.count() + 1)));
+    openni::VideoStream* streams[2] = {&s.depth, &s.color};
+    int index = -1;
+    const openni::Status status =
+        openni::OpenNI::waitForAnyStream(streams, s.has_color ? 2 : 1, &index, wait_ms);
+    if (status == openni::STATUS_TIME_OUT) continue;
+    if (status != openni::STATUS_OK || index < 0) {
+      if (kind_ == Kind::kFile) return FrameRead{FrameRead::Status::kEndOfStream, {}, {}};
+      // Treated like a stall: the next pass finds last_frame_time too old unless a frame comes.
+      std::this_thread::sleep_until(std::min(deadline, now + std::chrono::milliseconds(5)));
+      continue;
+    }
+    openni::VideoFrameRef frame;
+    if (streams[index]->readFrame(&frame) != openni::STATUS_OK || !frame.isValid()) continue;
+    s.last_frame_time = std::chrono::steady_clock::now();
+    if (index == 0) {
+      s.last_depth_index = frame.getFrameIndex();
+      s.pending_depth = frame;
+    } else {
+      s.last_color_index = frame.getFrameIndex();
+      s.pending_color = frame;
+    }
+    if (!s.pending_depth.isValid() || (s.has_color && !s.pending_color.isValid())) continue;
+
+    // Pair: with sync on, the two frames carry (nearly) the same device timestamp.
+    const int fps = std::max(1, s.depth.getVideoMode().getFps());
+    const auto half_period_us = static_cast<std::int64_t>(500000 / fps);
+    if (s.has_color) {
+      const auto td = static_cast<std::int64_t>(s.pending_depth.getTimestamp());
+      const auto tc = static_cast<std::int64_t>(s.pending_color.getTimestamp());
+      if (std::llabs(td - tc) > half_period_us) {
+        // The older one has no partner any more: drop it and wait for the next.
+        (td < tc ? s.pending_depth : s.pending_color).release();
+        counters_.dropped();
+        continue;
+      }
+    }
+    openni::VideoFrameRef depth_frame = s.pending_depth;
+    openni::VideoFrameRef color_frame = s.pending_color;
+    s.pending_depth.release();
+    s.pending_color.release();
+
+    const std::string what = description() + " frame " + std::to_string(depth_frame.getFrameIndex());
+    const int width = depth_frame.getWidth();
+    const int height = depth_frame.getHeight();
+    if (width <= 0 || height <= 0 ||
+        depth_frame.getStrideInBytes() < width * 2 ||
+        depth_frame.getDataSize() < depth_frame.getStrideInBytes() * height) {
+      return skipFrame(counters_, kComponent, what + ": depth buffer inconsistent with its size");
+    }
+    auto out = std::make_shared<RgbdFrame>();
+    const cv::Mat raw(height, width, CV_16UC1, const_cast<void*>(depth_frame.getData()),
+                      static_cast<std::size_t>(depth_frame.getStrideInBytes()));
+    out->depth_m = depthRawToMeters(raw, s.depth_scale);
+    if (s.has_color) {
+      const openni::PixelFormat format = color_frame.getVideoMode().getPixelFormat();
+      if (color_frame.getWidth() != width || color_frame.getHeight() != height) {
+        return skipFrame(counters_, kComponent,
+                         what + ": colour is " + std::to_string(color_frame.getWidth()) + "x" +
+                             std::to_string(color_frame.getHeight()) + ", depth is " +
+                             std::to_string(width) + "x" + std::to_string(height));
+      }
+      const int channels = format == openni::PIXEL_FORMAT_RGB888 ? 3 : 1;
+      if (!isColorFormat(format) || color_frame.getStrideInBytes() < width * channels ||
+          color_frame.getDataSize() < color_frame.getStrideInBytes() * height) {
+        return skipFrame(counters_, kComponent,
+                         what + ": colour format " + pixelFormatName(format) +
+                             " or buffer not supported (RGB888 or GRAY8)");
+      }
+      const cv::Mat color(height, width, channels == 3 ? CV_8UC3 : CV_8UC1,
+                          const_cast<void*>(color_frame.getData()),
+                          static_cast<std::size_t>(color_frame.getStrideInBytes()));
+      cv::cvtColor(color, out->color_bgr, channels == 3 ? cv::COLOR_RGB2BGR : cv::COLOR_GRAY2BGR);
+      ensureGray(*out);
+    }
+    const auto device_us = static_cast<std::uint64_t>(depth_frame.getTimestamp());
+    if (kind_ == Kind::kFile) {
+      out->utime = static_cast<Utime>(device_us);
+    } else {
+      if (!s.clock_anchored || device_us < s.first_device_us) {
+        s.clock_anchored = true;
+        s.first_device_us = device_us;
+        s.first_wall_utime = wallClockUtime();
+      }
+      out->utime = s.first_wall_utime + static_cast<Utime>(device_us - s.first_device_us);
+    }
+    out->sequence = depth_frame.getFrameIndex();
+    out->intrinsics = s.device_intrinsics;
+    if (out->intrinsics.width != width || out->intrinsics.height != height) {
+      out->intrinsics = out->intrinsics.scaled(width, height);
+    }
+    out->received_steady_ns = steadyNowNs();
+    const std::string error = gate_.check(*out, what);
+    if (!error.empty()) return skipFrame(counters_, kComponent, error);
+    counters_.frameRead();
+    return FrameRead{FrameRead::Status::kFrame, std::move(out), {}};
+  }
+}
+
+}  // namespace slamd

@@ -1,0 +1,60 @@
+#include "slamd/capture/source_support.hpp"
+
+#include "slamd/common/log.hpp"
+
+namespace slamd {
+
+void SourceCounters::frameRead() {
+  std::lock_guard<std::mutex> lock(mutex_);
+  ++stats_.frames_read;
+}
+
+void SourceCounters::skipped(const char* component, const std::string& message) {
+  SLAMD_LOG_WARN(component) << "skipped frame: " << message;
+  std::lock_guard<std::mutex> lock(mutex_);
+  ++stats_.frames_skipped;
+  stats_.last_error = message;
+}
+
+void SourceCounters::dropped(std::uint64_t count) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  stats_.frames_dropped += count;
+}
+
+void SourceCounters::reconnected() {
+  std::lock_guard<std::mutex> lock(mutex_);
+  ++stats_.reconnects;
+}
+
+void SourceCounters::failure(const char* component, const std::string& message) {
+  SLAMD_LOG_WARN(component) << message;
+  std::lock_guard<std::mutex> lock(mutex_);
+  stats_.last_error = message;
+}
+
+FrameSourceStats SourceCounters::snapshot() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return stats_;
+}
+
+std::string FrameGate::check(const RgbdFrame& frame, const std::string& what) {
+  const std::string error = frame.validationError();
+  if (!error.empty()) return what + ": " + error;
+  if (has_last_ && frame.utime <= last_utime_) {
+    return what + ": timestamp " + std::to_string(frame.utime) +
+           " us does not increase (previous frame " + std::to_string(last_utime_) + " us)";
+  }
+  has_last_ = true;
+  last_utime_ = frame.utime;
+  return {};
+}
+
+FrameRead skipFrame(SourceCounters& counters, const char* component, const std::string& message) {
+  counters.skipped(component, message);
+  FrameRead read;
+  read.status = FrameRead::Status::kSkipped;
+  read.message = message;
+  return read;
+}
+
+}  // namespace slamd

@@ -1,0 +1,119 @@
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+
+#include "slamd/capture/openni2_source.hpp"
+#include "test_data.hpp"
+
+namespace slamd {
+namespace {
+
+OpenNi2Config defaultConfig() {
+  Config config;
+  return OpenNi2Config::load(config);
+}
+
+TEST(OpenNi2Source, DummyDeviceDeliversRegisteredDepthAndColourFrames) {
+  OpenNi2Source source(OpenNi2Source::Kind::kDevice, "Dummy", defaultConfig());
+  source.open();
+  EXPECT_TRUE(source.isLive());
+  ASSERT_TRUE(source.intrinsics().has_value());
+  // The DummyDevice offers 320x240 only: the 640x480 camera.* intrinsics are scaled.
+  EXPECT_EQ(source.intrinsics()->width, 320);
+  EXPECT_DOUBLE_EQ(source.intrinsics()->fx, 525.0 / 2);
+  std::vector<RgbdFramePtr> frames;
+  for (int i = 0; i < 200 && frames.size() < 5; ++i) {
+    FrameRead read = source.next(std::chrono::milliseconds(1000));
+    ASSERT_NE(read.status, FrameRead::Status::kEndOfStream);
+    ASSERT_NE(read.status, FrameRead::Status::kSkipped) << read.message;
+    if (read.status == FrameRead::Status::kFrame) frames.push_back(read.frame);
+  }
+  ASSERT_EQ(frames.size(), 5u);
+  for (std::size_t i = 0; i < frames.size(); ++i) {
+    const RgbdFrame& f = *frames[i];
+    EXPECT_TRUE(f.validationError().empty()) << f.validationError();
+    EXPECT_EQ(f.depth_m.size(), cv::Size(320, 240));
+    EXPECT_EQ(f.color_bgr.size(), cv::Size(320, 240));
+    if (i > 0) {
+      EXPECT_GT(f.utime, frames[i - 1]->utime);
+      EXPECT_GT(f.sequence, frames[i - 1]->sequence);
+    }
+    // The DummyDevice's depth pattern holds 2000 mm at the first pixel: 2 m.
+    EXPECT_FLOAT_EQ(f.depth_m.at<float>(0, 0), 2.0f);
+  }
+  // Anchored to the wall clock: within a minute of now.
+  EXPECT_LT(std::llabs(frames.back()->utime - wallClockUtime()), 60 * kUtimePerSecond);
+  source.close();
+  EXPECT_EQ(source.stats().frames_read, 5u);
+}
+
+TEST(OpenNi2Source, OniRecordedFromTheDummyDeviceOpensWithItsFrames) {
+  const auto dir = test::makeTempDir("oni");
+  const std::string path = (dir / "dummy.oni").string();
+  recordOni("Dummy", path, 12);
+  ASSERT_TRUE(std::filesystem::exists(path));
+  OpenNi2Source source(OpenNi2Source::Kind::kFile, path, defaultConfig());
+  source.open();
+  EXPECT_FALSE(source.isLive());
+  EXPECT_EQ(source.description(), "oni:" + path);
+  // The recorder may miss or add a frame at either end of a stream.
+  EXPECT_GE(source.recordedDepthFrames(), 11);
+  EXPECT_LE(source.recordedDepthFrames(), 13);
+  ASSERT_TRUE(source.intrinsics().has_value());
+  EXPECT_EQ(source.intrinsics()->width, 320);
+}
+
+// Disabled: Debian 12's OniFile driver (OpenNI2 2.2.0.33) opens recordings made from the
+// DummyDevice and reports their frame counts, but its player thread never delivers a frame
+// (waitForAnyStream times out, a blocking readFrame never returns; the recording's header keeps
+// its "max timestamp" at -1). Enable with --gtest_also_run_disabled_tests to check a fixed driver.
+TEST(OpenNi2Source, DISABLED_OniRecordedFromTheDummyDevicePlaysBackOnceCompletely) {
+  const auto dir = test::makeTempDir("oni");
+  const std::string path = (dir / "dummy.oni").string();
+  recordOni("Dummy", path, 12);
+  OpenNi2Config config = defaultConfig();
+  config.frame_timeout_s = 2.0;
+  OpenNi2Source source(OpenNi2Source::Kind::kFile, path, config);
+  source.open();
+  std::vector<RgbdFramePtr> frames;
+  bool ended = false;
+  for (int i = 0; i < 1000 && !ended; ++i) {
+    FrameRead read = source.next(std::chrono::milliseconds(1000));
+    ASSERT_NE(read.status, FrameRead::Status::kSkipped) << read.message;
+    if (read.status == FrameRead::Status::kFrame) frames.push_back(read.frame);
+    ended = read.status == FrameRead::Status::kEndOfStream;
+  }
+  ASSERT_TRUE(ended) << "a recording ends (no repeat)";
+  EXPECT_GE(frames.size(), 10u);
+  for (std::size_t i = 0; i < frames.size(); ++i) {
+    EXPECT_FLOAT_EQ(frames[i]->depth_m.at<float>(0, 0), 2.0f);
+    if (i > 0) {
+      EXPECT_NEAR(static_cast<double>(frames[i]->utime - frames[i - 1]->utime), 33'000.0, 2000.0);
+    }
+  }
+}
+
+TEST(OpenNi2Source, MissingOniFileIsASourceErrorNamingIt) {
+  OpenNi2Source source(OpenNi2Source::Kind::kFile, "/nonexistent/recording.oni", defaultConfig());
+  try {
+    source.open();
+    FAIL() << "no error";
+  } catch (const SourceError& e) {
+    EXPECT_NE(std::string(e.what()).find("/nonexistent/recording.oni"), std::string::npos);
+  }
+}
+
+TEST(OpenNi2Source, RealDeviceDeliversFramesWhenAttached) {
+  if (listOpenNi2Devices().empty()) GTEST_SKIP() << "no OpenNI2 device attached; skipping";
+  OpenNi2Source source(OpenNi2Source::Kind::kDevice, "", defaultConfig());
+  source.open();
+  int frames = 0;
+  for (int i = 0; i < 100 && frames < 10; ++i) {
+    if (source.next(std::chrono::milliseconds(1000)).status == FrameRead::Status::kFrame) ++frames;
+  }
+  EXPECT_EQ(frames, 10);
+}
+
+}  // namespace
+}  // namespace slamd
