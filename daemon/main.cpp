@@ -21,6 +21,8 @@ int main(int argc, char** argv) {
   options.addOption("lcm-url", "URL", "LCM URL (default: lcm.url or $LCM_DEFAULT_URL)");
   options.addOption("trajectory-out", "FILE", "write the trajectory (TUM format) at exit");
   options.addOption("map-out", "FILE.bt", "write the map (.bt or .ot) at exit");
+  options.addOption("groundtruth-out", "FILE",
+                    "write the source's ground truth (TUM folders, synthetic worlds) at exit");
   if (!options.parse(argc, argv)) return options.exitCode();
 
   DaemonOverrides overrides;
@@ -28,6 +30,7 @@ int main(int argc, char** argv) {
   overrides.lcm_url = options.value("lcm-url");
   overrides.trajectory_out = options.value("trajectory-out");
   overrides.map_out = options.value("map-out");
+  overrides.groundtruth_out = options.value("groundtruth-out");
   std::unique_ptr<SlamDaemon> daemon;
   try {
     Config config = options.loadConfig();

@@ -7,6 +7,7 @@ DaemonConfig DaemonConfig::load(Config& config) {
   c.source = config.getString("daemon.source", c.source);
   c.trajectory_out = config.getString("daemon.trajectory_out", c.trajectory_out);
   c.map_out = config.getString("daemon.map_out", c.map_out);
+  c.groundtruth_out = config.getString("daemon.groundtruth_out", c.groundtruth_out);
   c.status_period_s = config.getDouble("daemon.status_period_s", c.status_period_s, 0.05, 60.0);
   c.drain_deadline_s = config.getDouble("daemon.drain_deadline_s", c.drain_deadline_s, 0.0, 600.0);
   c.heartbeat_period_s =
@@ -16,6 +17,8 @@ DaemonConfig DaemonConfig::load(Config& config) {
   c.publish_queue = config.getInt("daemon.publish_queue", c.publish_queue, 1, 1000);
   c.mapping_queue = config.getInt("daemon.mapping_queue", c.mapping_queue, 1, 1000);
   c.publish_frames = config.getBool("daemon.publish_frames", c.publish_frames);
+  c.frame_color_encoding =
+      config.getChoice("daemon.frame_color_encoding", c.frame_color_encoding, {"jpeg", "png", "rgb8"});
   c.frame_jpeg_quality = config.getInt("daemon.frame_jpeg_quality", c.frame_jpeg_quality, 1, 100);
   c.frame_depth_encoding =
       config.getChoice("daemon.frame_depth_encoding", c.frame_depth_encoding, {"png", "zlib"});

@@ -78,6 +78,7 @@ struct SlamDaemon::Impl {
     if (!overrides.source.empty()) daemon.source = overrides.source;
     if (!overrides.trajectory_out.empty()) daemon.trajectory_out = overrides.trajectory_out;
     if (!overrides.map_out.empty()) daemon.map_out = overrides.map_out;
+    if (!overrides.groundtruth_out.empty()) daemon.groundtruth_out = overrides.groundtruth_out;
     if (!overrides.lcm_url.empty()) config.set("lcm.url", overrides.lcm_url);
     channels = ChannelConfig::load(config);
     tracking_config = TrackingConfig::load(config);
@@ -223,7 +224,7 @@ int SlamDaemon::Impl::run(ShutdownSignals& signals) {
   const EdgePolicy capture_policy = live ? EdgePolicy::kDropOldest : EdgePolicy::kBackpressure;
   const FrameEncodeOptions frame_encoding = [&] {
     FrameEncodeOptions options;
-    options.color = ColorEncoding::kJpeg;
+    options.color = parseColorEncoding(daemon.frame_color_encoding);
     options.jpeg_quality = daemon.frame_jpeg_quality;
     options.depth = parseDepthEncoding(daemon.frame_depth_encoding);
     options.depth_scale = 1000.0;
@@ -475,6 +476,20 @@ int SlamDaemon::Impl::writeOutputs() {
     } catch (const std::exception& e) {
       SLAMD_LOG_ERROR(kLog) << e.what();
       exit_code = kExitOutputError;
+    }
+  }
+  if (!daemon.groundtruth_out.empty()) {
+    const std::optional<Trajectory> truth = source->groundTruth();
+    if (!truth) {
+      SLAMD_LOG_WARN(kLog) << "--groundtruth-out: source " << daemon.source
+                           << " has no ground truth; nothing written";
+    } else {
+      try {
+        writeTumTrajectory(daemon.groundtruth_out, *truth, "ground truth of " + daemon.source);
+      } catch (const std::exception& e) {
+        SLAMD_LOG_ERROR(kLog) << e.what();
+        exit_code = kExitOutputError;
+      }
     }
   }
   if (!daemon.map_out.empty()) {

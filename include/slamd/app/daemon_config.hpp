@@ -16,6 +16,9 @@ struct DaemonConfig {
   std::string trajectory_out;
   /// daemon.map_out (path .bt or .ot, default ""): map written at exit (--map-out).
   std::string map_out;
+  /// daemon.groundtruth_out (path, default ""): the source's ground truth (TUM folders, synthetic
+  /// worlds) written at exit in TUM format, next to the trajectory (--groundtruth-out).
+  std::string groundtruth_out;
   /// daemon.status_period_s (double, default 1, 0.05..60, s): SLAMD_STATUS publication period.
   double status_period_s = 1.0;
   /// daemon.drain_deadline_s (double, default 5, 0..600, s): at shutdown, how long the stages may
@@ -38,8 +41,10 @@ struct DaemonConfig {
   /// daemon.publish_frames (bool, default false): republish every processed frame on
   /// channels.frames (so lcm-logger captures the input and a log can be replayed into slamd).
   bool publish_frames = false;
-  /// daemon.frame_jpeg_quality (int, default 90, 1..100) and daemon.frame_depth_encoding
-  /// (png|zlib, default png) for republished frames.
+  /// daemon.frame_color_encoding (jpeg|png|rgb8, default jpeg), daemon.frame_jpeg_quality (int,
+  /// default 90, 1..100) and daemon.frame_depth_encoding (png|zlib, default png) for
+  /// republished frames (png/rgb8 colour + any depth encoding is lossless).
+  std::string frame_color_encoding = "jpeg";
   int frame_jpeg_quality = 90;
   std::string frame_depth_encoding = "png";
   /// mapping.enabled (bool, default true): run the mapping stage (voxel filter + OctoMap).

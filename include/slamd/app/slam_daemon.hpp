@@ -28,6 +28,7 @@ struct DaemonOverrides {
   std::string lcm_url;         ///< --lcm-url
   std::string trajectory_out;  ///< --trajectory-out
   std::string map_out;         ///< --map-out
+  std::string groundtruth_out;  ///< --groundtruth-out
 };
 
 /// What a finished run did (logged at exit, returned for tests).

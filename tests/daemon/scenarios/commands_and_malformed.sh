@@ -1,0 +1,41 @@
+#!/usr/bin/env bash
+# Malformed messages on SLAMD_COMMAND and on the frame channel: slamd keeps running and counts
+# them. SLAMD_COMMAND SAVE_MAP writes a loadable map while slamd runs.
+source "$(dirname "$0")/lib.sh"
+private_network
+cd "$WORK"
+start_pose_log poses.txt
+"$SLAMD_BIN/slamd" --config "$SLAMD_SOURCE_DIR/config/synthetic.yaml" --log-level warn \
+  --source lcm:SLAMD_FRAMES --trajectory-out trajectory.txt &
+SLAMD_PID=$!
+wait_for 20 "slamd to publish status" "$SLAMD_BIN/slamd-status" --once --timeout 1 --log-level error
+# A frame feeder: slamd-play republishes a synthetic sequence in real time.
+"$SLAMD_BIN/slamd-play" --config "$SLAMD_SOURCE_DIR/config/synthetic.yaml" --log-level warn \
+  --source synthetic:room --set synthetic.frames=600 --set capture.pacing.mode=realtime \
+  --publish SLAMD_FRAMES > play.log 2>&1 &
+PLAY_PID=$!
+wait_for 60 "10 poses" test "$(count_poses poses.txt)" -ge 10
+
+"$SLAMD_BIN/slamd-test-inject" SLAMD_COMMAND 30 1
+"$SLAMD_BIN/slamd-test-inject" SLAMD_FRAMES 30 2
+before=$(count_poses poses.txt)
+wait_for 30 "poses after the garbage" test "$(count_poses poses.txt)" -ge $((before + 20))
+kill -0 $SLAMD_PID || fail "slamd died after malformed messages"
+check "slamd kept tracking after 60 malformed messages"
+"$SLAMD_BIN/slamd-status" --once --timeout 3 --log-level error > status.txt
+grep -q "malformed" status.txt || fail "status does not report the malformed messages: $(cat status.txt)"
+check "status reports: $(grep -o '[0-9]* malformed[a-z ]*' status.txt | head -1)"
+capture_errors=$(awk '$1 == "capture" { print $8 }' status.txt)
+[ "${capture_errors:-0}" -ge 30 ] || fail "capture errors ${capture_errors:-none} < 30 malformed frames: $(cat status.txt)"
+check "capture counted $capture_errors bad frames"
+
+"$SLAMD_BIN/slamd-cmd" --log-level error save-map "$WORK/live.bt"
+wait_for 20 "live.bt to be written" test -s "$WORK/live.bt"
+kill -0 $SLAMD_PID || fail "slamd stopped after SAVE_MAP"
+convert_octree live.bt live_check.ot > /dev/null || fail "live.bt does not load"
+check "SAVE_MAP wrote a loadable map while slamd keeps running"
+
+stop_process $PLAY_PID
+kill -INT $SLAMD_PID
+wait $SLAMD_PID || fail "slamd exited with $? at SIGINT"
+check "slamd exited 0"
