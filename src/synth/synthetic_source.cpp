@@ -1,0 +1,124 @@
+#include "slamd/synth/synthetic_source.hpp"
+
+#include <climits>
+#include <cmath>
+#include <sstream>
+#include <stdexcept>
+
+#include <opencv2/imgproc.hpp>
+
+#include "slamd/common/config.hpp"
+
+namespace slamd {
+
+SyntheticConfig SyntheticConfig::load(Config& config) {
+  SyntheticConfig out;
+  out.trajectory = config.getChoice("synthetic.trajectory", out.trajectory,
+                                    {"auto", "zigzag", "random", "robot", "loop"});
+  out.frames = config.getInt("synthetic.frames", out.frames, 0, 10'000'000);
+  out.seed = static_cast<std::uint64_t>(config.getInt("synthetic.seed", 42, 0, INT_MAX));
+  out.start_time_s = config.getDouble("synthetic.start_time_s", out.start_time_s, 0.0, 4.0e9);
+  out.scene = synth::SceneParams::load(config);
+  out.motion = synth::MotionParams::load(config);
+  out.sensor = synth::SensorParams::load(config);
+  out.camera = CameraConfig::load(config, 5000.0);
+  if (out.camera.intrinsics.distortion_model != DistortionModel::kNone) {
+    throw ConfigError(
+        "camera.distortion_model = plumb_bob: synthetic worlds render an ideal pinhole camera "
+        "(allowed: none)");
+  }
+  return out;
+}
+
+SyntheticSource::SyntheticSource(const std::string& scene_name, const SyntheticConfig& config)
+    : scene_name_(scene_name), config_(config), sensor_(config.sensor) {
+  try {
+    scene_ = std::make_unique<synth::Scene>(synth::makeScene(scene_name, config_.scene, config_.seed));
+  } catch (const std::invalid_argument& error) {
+    throw SourceError(std::string("synthetic source: ") + error.what());
+  }
+  const synth::MotionKind kind = config_.trajectory == "auto"
+                                     ? synth::defaultMotionFor(scene_name)
+                                     : synth::parseMotionKind(config_.trajectory);
+  renderer_ = std::make_unique<synth::Renderer>(*scene_, config_.camera.intrinsics);
+  motion_ = std::make_unique<synth::CameraMotion>(*scene_, kind, config_.motion, config_.seed);
+  frame_count_ = config_.frames > 0 ? config_.frames : motion_->naturalFrameCount();
+  start_utime_ = secondsToUtime(config_.start_time_s);
+  ground_truth_ = synth::sampleTrajectory(*motion_, frame_count_, start_utime_, config_.motion.rate_hz);
+}
+
+void SyntheticSource::open() {
+  position_ = 0;
+  open_ = true;
+}
+
+void SyntheticSource::close() { open_ = false; }
+
+std::string SyntheticSource::description() const {
+  std::ostringstream out;
+  out << "synthetic:" << scene_name_ << " (" << synth::motionKindName(motion_->kind()) << ", "
+      << frame_count_ << " frames, seed " << config_.seed << ")";
+  return out.str();
+}
+
+void SyntheticSource::renderExact(int index, synth::RenderOutput& out) const {
+  renderer_->render(ground_truth_.at(static_cast<std::size_t>(index)).T_world_camera, out);
+}
+
+RgbdFramePtr SyntheticSource::renderFrame(int index) const {
+  if (index < 0 || index >= frame_count_) {
+    throw std::out_of_range("synthetic frame " + std::to_string(index) + " outside [0, " +
+                            std::to_string(frame_count_) + ")");
+  }
+  const Utime utime = synth::frameUtime(start_utime_, index, config_.motion.rate_hz);
+  const double t_s = utimeToSeconds(utime - start_utime_);
+  synth::RenderOutput render;
+  renderExact(index, render);
+
+  cv::Mat color = render.color_bgr;
+  const synth::SensorParams& sensor = config_.sensor;
+  if (sensor.motion_blur) {
+    // Motion blur: the colour camera integrates light over its shutter time, which ends at the
+    // frame's timestamp; average renders at evenly spaced instants across it.
+    cv::Mat sum;
+    render.color_bgr.convertTo(sum, CV_32FC3);
+    synth::RenderOutput sub;
+    for (int k = 1; k < sensor.blur_samples; ++k) {
+      const double t_sub = t_s - sensor.exposure_time_s * k / (sensor.blur_samples - 1);
+      renderer_->render(motion_->poseAt(t_sub), sub);
+      cv::accumulate(sub.color_bgr, sum);
+    }
+    sum.convertTo(color, CV_8UC3, 1.0 / sensor.blur_samples);
+  }
+
+  auto frame = std::make_shared<RgbdFrame>();
+  frame->utime = utime;
+  frame->sequence = index;
+  frame->frame_id = "camera";
+  frame->intrinsics = config_.camera.intrinsics;
+  frame->depth_m = sensor_.measureDepth(render, config_.seed, index);
+  sensor_.measureColor(color, config_.seed, index, sensor_.exposureGain(config_.seed, t_s),
+                       frame->color_bgr);
+  ensureGray(*frame);
+  frame->received_steady_ns = steadyNowNs();
+  return frame;
+}
+
+FrameRead SyntheticSource::next(std::chrono::milliseconds /*timeout*/) {
+  FrameRead read;
+  if (!open_ || position_ >= frame_count_) {
+    read.status = FrameRead::Status::kEndOfStream;
+    return read;
+  }
+  read.frame = renderFrame(position_++);
+  read.status = FrameRead::Status::kFrame;
+  ++stats_.frames_read;
+  return read;
+}
+
+std::unique_ptr<FrameSource> createSyntheticSource(const std::string& scene, Config& config) {
+  const SyntheticConfig synthetic = SyntheticConfig::load(config);
+  return std::make_unique<SyntheticSource>(scene, synthetic);
+}
+
+}  // namespace slamd

@@ -1,0 +1,91 @@
+#include "slamd/synth/tum_writer.hpp"
+
+#include <cinttypes>
+#include <cstdio>
+#include <filesystem>
+#include <stdexcept>
+#include <vector>
+
+#include <opencv2/imgcodecs.hpp>
+
+namespace slamd {
+namespace {
+
+std::ofstream openList(const std::filesystem::path& path, const std::string& what,
+                       const std::string& description) {
+  std::ofstream file(path, std::ios::trunc);
+  if (!file) throw std::runtime_error("cannot write " + path.string());
+  file << "# " << what << "\n# file: '" << description << "'\n# timestamp filename\n";
+  return file;
+}
+
+void writePng(const std::filesystem::path& path, const cv::Mat& image) {
+  const std::vector<int> params = {cv::IMWRITE_PNG_COMPRESSION, 3};
+  bool ok = false;
+  try {
+    ok = cv::imwrite(path.string(), image, params);
+  } catch (const cv::Exception& error) {
+    throw std::runtime_error("cannot write " + path.string() + ": " + error.what());
+  }
+  if (!ok) throw std::runtime_error("cannot write " + path.string());
+}
+
+}  // namespace
+
+std::string formatTumTimestamp(Utime utime) {
+  char text[64];
+  const Utime seconds = utime / kUtimePerSecond;
+  const Utime micros = utime % kUtimePerSecond;
+  std::snprintf(text, sizeof text, "%" PRId64 ".%06" PRId64, seconds, micros);
+  return text;
+}
+
+TumSequenceWriter::TumSequenceWriter(std::string folder, std::string description,
+                                     double depth_scale)
+    : folder_(std::move(folder)), description_(std::move(description)), depth_scale_(depth_scale) {
+  if (!(depth_scale_ > 0.0)) throw std::invalid_argument("depth scale must be positive");
+}
+
+void TumSequenceWriter::open() {
+  const std::filesystem::path root(folder_);
+  std::error_code error;
+  for (const char* sub : {"rgb", "depth"}) {
+    std::filesystem::create_directories(root / sub, error);
+    if (error) {
+      throw std::runtime_error("cannot create " + (root / sub).string() + ": " + error.message());
+    }
+  }
+  rgb_list_ = openList(root / "rgb.txt", "color images", description_);
+  depth_list_ = openList(root / "depth.txt", "depth maps", description_);
+  frames_written_ = 0;
+}
+
+void TumSequenceWriter::write(const RgbdFrame& frame) {
+  if (!rgb_list_.is_open()) throw std::logic_error("TumSequenceWriter::write before open");
+  if (frame.utime < 0) {
+    throw std::runtime_error("frame " + std::to_string(frame.sequence) + " has negative utime " +
+                             std::to_string(frame.utime));
+  }
+  const std::string stamp = formatTumTimestamp(frame.utime);
+  const std::filesystem::path root(folder_);
+  const std::string rgb_name = "rgb/" + stamp + ".png";
+  const std::string depth_name = "depth/" + stamp + ".png";
+  writePng(root / rgb_name, frame.color_bgr);
+  writePng(root / depth_name, depthMetersToRaw(frame.depth_m, depth_scale_));
+  rgb_list_ << stamp << " " << rgb_name << "\n";
+  depth_list_ << stamp << " " << depth_name << "\n";
+  if (!rgb_list_ || !depth_list_) throw std::runtime_error("cannot append to the lists in " + folder_);
+  ++frames_written_;
+}
+
+void TumSequenceWriter::finish(const Trajectory& ground_truth) {
+  rgb_list_.close();
+  depth_list_.close();
+  if (!rgb_list_ || !depth_list_) throw std::runtime_error("cannot finish the lists in " + folder_);
+  if (!ground_truth.empty()) {
+    writeTumTrajectory((std::filesystem::path(folder_) / "groundtruth.txt").string(), ground_truth,
+                       "ground truth trajectory\nfile: '" + description_ + "'");
+  }
+}
+
+}  // namespace slamd
