@@ -258,6 +258,126 @@ std::vector<cv::KeyPoint> bucketKeypoints(const std::vector<cv::KeyPoint>& keypo
   return out;
 }
 
+std::vector<Eigen::Vector2d> undistortPixels(const std::vector<cv::Point2f>& raw,
+                                             const CameraIntrinsics& K,
+                                             const TrackingConfig& config) {
+  std::vector<Eigen::Vector2d> out(raw.size());
+  const bool distorted =
+      config.undistort && K.distortion_model == DistortionModel::kPlumbBob &&
+      std::any_of(K.distortion.begin(), K.distortion.end(), [](double d) { return d != 0.0; });
+  if (distorted && !raw.empty()) {
+    const cv::Matx33d camera(K.fx, 0, K.cx, 0, K.fy, K.cy, 0, 0, 1);
+    const cv::Matx<double, 1, 5> dist(K.distortion[0], K.distortion[1], K.distortion[2],
+                                      K.distortion[3], K.distortion[4]);
+    std::vector<cv::Point2f> undistorted;
+    cv::undistortPoints(raw, undistorted, camera, dist, cv::noArray(), camera);
+    for (std::size_t i = 0; i < raw.size(); ++i) {
+      out[i] = Eigen::Vector2d(undistorted[i].x, undistorted[i].y);
+    }
+  } else {
+    for (std::size_t i = 0; i < raw.size(); ++i) out[i] = Eigen::Vector2d(raw[i].x, raw[i].y);
+  }
+  return out;
+}
+
+bool alignPatch(const cv::Mat& templ, const cv::Point2f& templ_px, const cv::Mat& image,
+                const cv::Point2f& initial_px, double max_shift_px, cv::Point2f& aligned_px) {
+  constexpr int kHalf = 4;              // 9x9 patch
+  constexpr int kSide = 2 * kHalf + 1;
+  constexpr int kBorder = kHalf + 2;
+  auto inside = [](const cv::Mat& img, double x, double y) {
+    return x >= kBorder && y >= kBorder && x < img.cols - kBorder - 1 && y < img.rows - kBorder - 1;
+  };
+  auto sample = [](const cv::Mat& img, double x, double y) {
+    const int x0 = static_cast<int>(x);
+    const int y0 = static_cast<int>(y);
+    const double ax = x - x0, ay = y - y0;
+    const std::uint8_t* r0 = img.ptr<std::uint8_t>(y0) + x0;
+    const std::uint8_t* r1 = img.ptr<std::uint8_t>(y0 + 1) + x0;
+    return (1 - ay) * ((1 - ax) * r0[0] + ax * r0[1]) + ay * ((1 - ax) * r1[0] + ax * r1[1]);
+  };
+  if (templ.empty() || image.empty() || !inside(templ, templ_px.x, templ_px.y) ||
+      !inside(image, initial_px.x, initial_px.y)) {
+    return false;
+  }
+  // Template with a one-pixel ring for central-difference gradients.
+  double t[kSide + 2][kSide + 2];
+  for (int dy = -kHalf - 1; dy <= kHalf + 1; ++dy) {
+    for (int dx = -kHalf - 1; dx <= kHalf + 1; ++dx) {
+      t[dy + kHalf + 1][dx + kHalf + 1] = sample(templ, templ_px.x + dx, templ_px.y + dy);
+    }
+  }
+  double gx[kSide][kSide], gy[kSide][kSide], tv[kSide][kSide];
+  double t_mean = 0.0;
+  double h00 = 0, h01 = 0, h11 = 0;
+  for (int y = 0; y < kSide; ++y) {
+    for (int x = 0; x < kSide; ++x) {
+      gx[y][x] = 0.5 * (t[y + 1][x + 2] - t[y + 1][x]);
+      gy[y][x] = 0.5 * (t[y + 2][x + 1] - t[y][x + 1]);
+      tv[y][x] = t[y + 1][x + 1];
+      t_mean += tv[y][x];
+    }
+  }
+  t_mean /= kSide * kSide;
+  double gx_mean = 0, gy_mean = 0;
+  for (int y = 0; y < kSide; ++y) {
+    for (int x = 0; x < kSide; ++x) {
+      gx_mean += gx[y][x];
+      gy_mean += gy[y][x];
+    }
+  }
+  gx_mean /= kSide * kSide;
+  gy_mean /= kSide * kSide;
+  // With a brightness offset eliminated by mean subtraction, the gradients are centred too.
+  for (int y = 0; y < kSide; ++y) {
+    for (int x = 0; x < kSide; ++x) {
+      const double cx = gx[y][x] - gx_mean, cy = gy[y][x] - gy_mean;
+      h00 += cx * cx;
+      h01 += cx * cy;
+      h11 += cy * cy;
+    }
+  }
+  const double det = h00 * h11 - h01 * h01;
+  if (det < 1e-6 * (h00 + h11) * (h00 + h11) || h00 + h11 < 1.0) return false;
+  double px = initial_px.x, py = initial_px.y;
+  bool converged = false;
+  for (int it = 0; it < 10; ++it) {
+    if (!inside(image, px, py)) return false;
+    double iv[kSide][kSide];
+    double i_mean = 0.0;
+    for (int y = 0; y < kSide; ++y) {
+      for (int x = 0; x < kSide; ++x) {
+        iv[y][x] = sample(image, px + x - kHalf, py + y - kHalf);
+        i_mean += iv[y][x];
+      }
+    }
+    i_mean /= kSide * kSide;
+    double b0 = 0, b1 = 0;
+    for (int y = 0; y < kSide; ++y) {
+      for (int x = 0; x < kSide; ++x) {
+        const double e = (iv[y][x] - i_mean) - (tv[y][x] - t_mean);
+        b0 += (gx[y][x] - gx_mean) * e;
+        b1 += (gy[y][x] - gy_mean) * e;
+      }
+    }
+    const double dx = (h11 * b0 - h01 * b1) / det;
+    const double dy = (h00 * b1 - h01 * b0) / det;
+    px -= dx;
+    py -= dy;
+    if (dx * dx + dy * dy < 1e-4) {
+      converged = true;
+      break;
+    }
+  }
+  if (!converged || !inside(image, px, py)) return false;
+  if (std::hypot(px - static_cast<double>(initial_px.x), py - static_cast<double>(initial_px.y)) >
+      max_shift_px) {
+    return false;
+  }
+  aligned_px = cv::Point2f(static_cast<float>(px), static_cast<float>(py));
+  return true;
+}
+
 void attachGeometry(const cv::Mat& depth_m, const CameraIntrinsics& K,
                     const TrackingConfig& config, FeatureSet& features) {
   const std::size_t n = features.keypoints.size();
@@ -265,25 +385,9 @@ void attachGeometry(const cv::Mat& depth_m, const CameraIntrinsics& K,
   features.points.resize(n);
   features.num_with_depth = 0;
   if (n == 0) return;
-  const bool distorted =
-      config.undistort && K.distortion_model == DistortionModel::kPlumbBob &&
-      std::any_of(K.distortion.begin(), K.distortion.end(), [](double d) { return d != 0.0; });
-  if (distorted) {
-    std::vector<cv::Point2f> raw(n);
-    for (std::size_t i = 0; i < n; ++i) raw[i] = features.keypoints[i].pt;
-    const cv::Matx33d camera(K.fx, 0, K.cx, 0, K.fy, K.cy, 0, 0, 1);
-    const cv::Matx<double, 1, 5> dist(K.distortion[0], K.distortion[1], K.distortion[2],
-                                      K.distortion[3], K.distortion[4]);
-    std::vector<cv::Point2f> undistorted;
-    cv::undistortPoints(raw, undistorted, camera, dist, cv::noArray(), camera);
-    for (std::size_t i = 0; i < n; ++i) {
-      features.pixels[i] = Eigen::Vector2d(undistorted[i].x, undistorted[i].y);
-    }
-  } else {
-    for (std::size_t i = 0; i < n; ++i) {
-      features.pixels[i] = Eigen::Vector2d(features.keypoints[i].pt.x, features.keypoints[i].pt.y);
-    }
-  }
+  std::vector<cv::Point2f> raw(n);
+  for (std::size_t i = 0; i < n; ++i) raw[i] = features.keypoints[i].pt;
+  features.pixels = undistortPixels(raw, K, config);
   const double nan = std::numeric_limits<double>::quiet_NaN();
   const bool have_depth = !depth_m.empty() && depth_m.type() == CV_32FC1;
   for (std::size_t i = 0; i < n; ++i) {

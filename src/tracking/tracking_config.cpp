@@ -28,6 +28,7 @@ TrackingConfig TrackingConfig::load(Config& config) {
   c.orb_fast_threshold =
       config.getInt("tracking.orb_fast_threshold", c.orb_fast_threshold, 1, 100);
   c.subpixel = config.getBool("tracking.subpixel", c.subpixel);
+  c.patch_refinement = config.getBool("tracking.patch_refinement", c.patch_refinement);
   c.undistort = config.getBool("tracking.undistort", c.undistort);
   c.min_depth_m = config.getDouble("tracking.min_depth_m", c.min_depth_m, 0.05, 100.0);
   c.max_depth_m = config.getDouble("tracking.max_depth_m", c.max_depth_m, 0.05, 100.0);
@@ -69,6 +70,7 @@ TrackingConfig TrackingConfig::load(Config& config) {
                                                   c.keyframe_max_translation_m, 0.001, 100);
   c.keyframe_max_rotation_deg = config.getDouble("tracking.keyframe_max_rotation_deg",
                                                  c.keyframe_max_rotation_deg, 0.1, 180);
+  c.keyframe_window = config.getInt("tracking.keyframe_window", c.keyframe_window, 1, 1000);
   c.max_predicted_frames =
       config.getInt("tracking.max_predicted_frames", c.max_predicted_frames, 0, 1000);
   c.failure_sigma_scale =

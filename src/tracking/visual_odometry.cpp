@@ -87,6 +87,7 @@ VisualOdometry::~VisualOdometry() = default;
 void VisualOdometry::reset() {
   state_ = TrackingState::kNotInitialized;
   keyframe_.reset();
+  recent_keyframes_.clear();
   prev_features_.reset();
   prev_tracked_ = false;
   T_world_prev_ = SE3::Identity();
@@ -253,6 +254,7 @@ VisualOdometry::TrackAttempt VisualOdometry::track(const FeatureSet& ref,
                                                    const CurrentFrame& curr) {
   TrackAttempt a;
   const CameraIntrinsics& K = curr.K;
+  const FeatureSet& cf = *curr.features;
   std::int64_t t0 = steadyNowNs();
   std::vector<Correspondence> matches;
   if (have_prior) {
@@ -345,6 +347,33 @@ VisualOdometry::TrackAttempt VisualOdometry::track(const FeatureSet& ref,
         recheck(refined.T_ref_curr);
         refined = refinePose(matches, inliers, K, refined.T_ref_curr, options);
       }
+    }
+  }
+  if (refined.success && config_.patch_refinement) {
+    // Align each inlier's reference patch in the current image: the correspondences become
+    // sub-pixel consistent with the reference keypoints (not two independent detections).
+    std::vector<cv::Point2f> aligned;
+    std::vector<std::size_t> which;
+    for (std::size_t i = 0; i < matches.size(); ++i) {
+      if (!inliers[i]) continue;
+      const Correspondence& c = matches[i];
+      cv::Point2f out;
+      if (alignPatch(ref.gray, ref.keypoints[static_cast<std::size_t>(c.ref_index)].pt, cf.gray,
+                     cf.keypoints[static_cast<std::size_t>(c.curr_index)].pt, 3.0, out)) {
+        aligned.push_back(out);
+        which.push_back(i);
+      }
+    }
+    const std::vector<Eigen::Vector2d> pixels = undistortPixels(aligned, K, config_);
+    for (std::size_t k = 0; k < which.size(); ++k) {
+      matches[which[k]].pixel_curr = pixels[k];
+      matches[which[k]].pixel_sigma_px = config_.pixel_sigma_px;
+    }
+    recheck(refined.T_ref_curr);
+    refined = refinePose(matches, inliers, K, refined.T_ref_curr, options);
+    if (refined.success) {
+      recheck(refined.T_ref_curr);
+      refined = refinePose(matches, inliers, K, refined.T_ref_curr, options);
     }
   }
   a.time_motion_ms = msSince(t0);
@@ -521,6 +550,9 @@ OdometryResult VisualOdometry::process(const RgbdFrame& frame, const RgbdFramePt
     *curr.features = FeatureSet();
   }
   attachGeometry(frame.depth_m, K, config_, *curr.features);
+  // Keyframes keep the image for patch alignment; frames passed by reference may be reused by
+  // the caller, so their image is copied.
+  curr.features->gray = frame_ptr && gray.data == frame.gray.data ? gray : gray.clone();
   curr.buildGrid();
   cv::Mat small;
   if (config_.frontend == FrontEndType::kFovis) {
@@ -548,6 +580,8 @@ OdometryResult VisualOdometry::process(const RgbdFrame& frame, const RgbdFramePt
     if (state_ == TrackingState::kLost) ++segment_;
     const SE3 T_world_curr = T_world_prev_;
     keyframe_ = makeKeyframe(curr, frame, frame_ptr, T_world_curr);
+    recent_keyframes_.clear();
+    recent_keyframes_.push_back(keyframe_);
     res.status = OdometryStatus::kOk;
     res.tracking_state = TrackingState::kOk;
     res.T_world_camera = T_world_curr;
@@ -608,11 +642,8 @@ OdometryResult VisualOdometry::process(const RgbdFrame& frame, const RgbdFramePt
   res.stats.time_motion_ms = attempt.time_motion_ms;
   if (attempt.status != OdometryStatus::kOk) return fail(attempt.status, curr.features);
 
-  const SE3 T_world_curr = normalizedSE3(T_world_ref * attempt.T_ref_curr);
   res.status = OdometryStatus::kOk;
   res.tracking_state = TrackingState::kOk;
-  res.T_world_camera = T_world_curr;
-  res.T_prev_curr = normalizedSE3(T_world_prev_.inverse() * T_world_curr);
   res.T_ref_curr = attempt.T_ref_curr;
   res.covariance_ref_curr = attempt.covariance;
   res.covariance = attempt.covariance;
@@ -620,22 +651,71 @@ OdometryResult VisualOdometry::process(const RgbdFrame& frame, const RgbdFramePt
   res.reference_keyframe_id = ref_id;
 
   // Keyframe decision.
-  bool new_keyframe = from_previous;
-  if (!new_keyframe) {
-    const double overlap = static_cast<double>(attempt.num_inliers) /
-                           std::max(1, keyframe_->features.num_with_depth);
-    const double translation_m = attempt.T_ref_curr.translation().norm();
-    const double rotation_deg = rotationAngleRad(attempt.T_ref_curr.linear()) * 180.0 / M_PI;
-    new_keyframe = attempt.num_inliers < config_.keyframe_min_inliers ||
-                   overlap < config_.keyframe_min_overlap ||
-                   translation_m > config_.keyframe_max_translation_m ||
-                   rotation_deg > config_.keyframe_max_rotation_deg;
+  auto needsNewKeyframe = [&](const TrackAttempt& t, const Keyframe& kf) {
+    const double overlap =
+        static_cast<double>(t.num_inliers) / std::max(1, kf.features.num_with_depth);
+    const double translation_m = t.T_ref_curr.translation().norm();
+    const double rotation_deg = rotationAngleRad(t.T_ref_curr.linear()) * 180.0 / M_PI;
+    return t.num_inliers < config_.keyframe_min_inliers ||
+           overlap < config_.keyframe_min_overlap ||
+           translation_m > config_.keyframe_max_translation_m ||
+           rotation_deg > config_.keyframe_max_rotation_deg;
+  };
+  SE3 T_world_curr = normalizedSE3(T_world_ref * attempt.T_ref_curr);
+  bool new_keyframe = from_previous || needsNewKeyframe(attempt, *keyframe_);
+  if (new_keyframe && config_.keyframe_window > 1) {
+    // Before making a keyframe, try the recent keyframes near the current pose: re-using one
+    // (the camera came back) measures against it directly instead of chaining more drift.
+    std::vector<std::pair<double, KeyframePtr>> candidates;
+    for (const KeyframePtr& kf : recent_keyframes_) {
+      if (kf == keyframe_) continue;
+      const SE3 T_kf_curr = kf->T_world_camera.inverse() * T_world_curr;
+      const double translation_m = T_kf_curr.translation().norm();
+      const double rotation_deg = rotationAngleRad(T_kf_curr.linear()) * 180.0 / M_PI;
+      if (translation_m > 0.5 * config_.keyframe_max_translation_m ||
+          rotation_deg > 0.5 * config_.keyframe_max_rotation_deg) {
+        continue;
+      }
+      candidates.emplace_back(translation_m / config_.keyframe_max_translation_m +
+                                  rotation_deg / config_.keyframe_max_rotation_deg,
+                              kf);
+    }
+    std::sort(candidates.begin(), candidates.end(),
+              [](const auto& a, const auto& b) { return a.first < b.first; });
+    for (std::size_t k = 0; k < candidates.size() && k < 2; ++k) {
+      const KeyframePtr& kf = candidates[k].second;
+      const TrackAttempt reuse =
+          track(kf->features, kf->T_world_camera.inverse() * T_world_curr, true, curr);
+      res.stats.time_matching_ms += reuse.time_matching_ms;
+      res.stats.time_motion_ms += reuse.time_motion_ms;
+      if (reuse.status == OdometryStatus::kOk && !needsNewKeyframe(reuse, *kf)) {
+        keyframe_ = kf;
+        attempt = reuse;
+        T_world_curr = normalizedSE3(kf->T_world_camera * reuse.T_ref_curr);
+        res.reference_keyframe_id = kf->id;
+        res.ref_utime = kf->utime;
+        res.stats.num_matches = reuse.num_matches;
+        res.stats.num_inliers = reuse.num_inliers;
+        res.stats.reprojection_error_px = reuse.rms_px;
+        res.T_ref_curr = reuse.T_ref_curr;
+        res.covariance_ref_curr = reuse.covariance;
+        res.covariance = reuse.covariance;
+        new_keyframe = false;
+        break;
+      }
+    }
   }
   if (new_keyframe) {
     keyframe_ = makeKeyframe(curr, frame, frame_ptr, T_world_curr);
     res.is_keyframe = true;
     res.keyframe = keyframe_;
+    recent_keyframes_.push_back(keyframe_);
+    while (static_cast<int>(recent_keyframes_.size()) > config_.keyframe_window) {
+      recent_keyframes_.pop_front();
+    }
   }
+  res.T_world_camera = T_world_curr;
+  res.T_prev_curr = normalizedSE3(T_world_prev_.inverse() * T_world_curr);
   res.segment = segment_;
   velocity_prev_curr_ = res.T_prev_curr;
   have_velocity_ = true;

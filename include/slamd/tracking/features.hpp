@@ -26,6 +26,7 @@ struct FeatureSet {
   std::vector<Eigen::Vector2d> pixels;  ///< undistorted pixels (ideal pinhole), pixels
   std::vector<Eigen::Vector3d> points;  ///< camera optical frame, metres; NaN without depth
   std::vector<float> scale;             ///< keypoint scale relative to level 0 (>= 1)
+  cv::Mat gray;                         ///< the image the features come from (CV_8UC1, shared)
   int num_with_depth = 0;
 
   std::size_t size() const { return keypoints.size(); }
@@ -51,6 +52,19 @@ std::unique_ptr<FeatureExtractor> makeFeatureExtractor(const TrackingConfig& con
 /// check) and back-projects the points.
 void attachGeometry(const cv::Mat& depth_m, const CameraIntrinsics& intrinsics,
                     const TrackingConfig& config, FeatureSet& features);
+
+/// Undistorted (ideal pinhole) pixels of raw image pixels, when configured and the intrinsics
+/// carry plumb-bob coefficients; otherwise the raw pixels.
+std::vector<Eigen::Vector2d> undistortPixels(const std::vector<cv::Point2f>& raw,
+                                             const CameraIntrinsics& intrinsics,
+                                             const TrackingConfig& config);
+
+/// Sub-pixel alignment of a square patch (translation plus brightness offset, inverse
+/// compositional Lucas-Kanade): the position in `image` (raw pixels) of the patch of `templ`
+/// centred at templ_px, starting from initial_px. Returns false when it does not converge or
+/// leaves the image or moves more than max_shift_px from initial_px.
+bool alignPatch(const cv::Mat& templ, const cv::Point2f& templ_px, const cv::Mat& image,
+                const cv::Point2f& initial_px, double max_shift_px, cv::Point2f& aligned_px);
 
 /// Keeps at most max_total features, at most max_total / (cols * rows) per grid cell (strongest
 /// response first); cells left under quota give their share to the strongest remaining ones.

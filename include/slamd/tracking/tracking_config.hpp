@@ -35,6 +35,10 @@ struct TrackingConfig {
   int orb_fast_threshold = 12;
   /// tracking.subpixel (bool, default true): refine level-0 ORB/FAST corners to sub-pixel.
   bool subpixel = true;
+  /// tracking.patch_refinement (bool, default true): refine each inlier's position in the current
+  /// image by aligning the reference image's 9x9 patch around its keypoint (Lucas-Kanade,
+  /// translation + brightness offset), as FOVIS refines its matches; then re-estimate.
+  bool patch_refinement = true;
   /// tracking.undistort (bool, default true): undistort keypoints with the plumb-bob
   /// coefficients of the frame's intrinsics before any geometry.
   bool undistort = true;
@@ -107,6 +111,10 @@ struct TrackingConfig {
   double keyframe_max_translation_m = 0.15;
   /// tracking.keyframe_max_rotation_deg (double, default 10, range [0.1, 180], degrees).
   double keyframe_max_rotation_deg = 10.0;
+  /// tracking.keyframe_window (int, default 10, range [1, 1000]): recent keyframes kept; when a
+  /// new keyframe is due, a recent one near the current pose is re-used if it tracks well
+  /// (1 = never re-use).
+  int keyframe_window = 10;
   /// tracking.max_predicted_frames (int, default 5, range [0, 1000]): consecutive failed frames
   /// bridged by constant-velocity prediction before tracking is declared LOST.
   int max_predicted_frames = 5;

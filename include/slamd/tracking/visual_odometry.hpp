@@ -23,6 +23,7 @@
 
 #include <array>
 #include <cstdint>
+#include <deque>
 #include <memory>
 #include <random>
 #include <vector>
@@ -139,6 +140,7 @@ class VisualOdometry {
 
   TrackingState state_ = TrackingState::kNotInitialized;
   KeyframePtr keyframe_;
+  std::deque<KeyframePtr> recent_keyframes_;  ///< the last keyframe_window keyframes (segment)
   std::int64_t next_keyframe_id_ = 0;
   std::int64_t segment_ = 0;
 

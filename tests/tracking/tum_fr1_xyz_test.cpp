@@ -1,0 +1,63 @@
+// The first 150 frames of TUM fr1/xyz with each fast front end; thresholds fail if tracking
+// breaks (they sit about 2x above what the front ends achieve).
+
+#include <gtest/gtest.h>
+#include <opencv2/core.hpp>
+
+#include "slamd/capture/tum_source.hpp"
+#include "slamd/eval/trajectory_error.hpp"
+#include "slamd/tracking/visual_odometry.hpp"
+#include "test_data.hpp"
+
+namespace slamd {
+namespace {
+
+struct RunResult {
+  double ate_rmse_m = 0.0;
+  int frames = 0;
+  int failures = 0;
+};
+
+RunResult runFirstFrames(FrontEndType frontend, int max_frames) {
+  const auto folder = test::findDataset("tum_fr1_xyz");
+  Config config = Config::fromFile(std::string(SLAMD_SOURCE_DIR) + "/config/tum_fr1.yaml");
+  TrackingConfig tracking = TrackingConfig::load(config);
+  tracking.frontend = frontend;
+  TumSource source(folder->string(), TumSourceConfig::load(config));
+  source.open();
+  VisualOdometry vo(tracking);
+  Trajectory estimate;
+  RunResult result;
+  while (result.frames < max_frames) {
+    const FrameRead read = source.next(std::chrono::milliseconds(1000));
+    if (read.status == FrameRead::Status::kEndOfStream) break;
+    if (read.status != FrameRead::Status::kFrame) continue;
+    const OdometryResult r = vo.processFrame(read.frame);
+    ++result.frames;
+    if (r.status != OdometryStatus::kOk) ++result.failures;
+    estimate.push_back({utimeToSeconds(r.utime), r.T_world_camera});
+  }
+  result.ate_rmse_m = eval::computeAte(*source.groundTruth(), estimate).translation_m.rmse;
+  return result;
+}
+
+TEST(TumFr1Xyz, OrbTracksTheFirst150Frames) {
+  if (!test::findDataset("tum_fr1_xyz")) GTEST_SKIP() << test::missingDataMessage("tum_fr1_xyz");
+  const RunResult r = runFirstFrames(FrontEndType::kOrb, 150);
+  EXPECT_EQ(r.frames, 150);
+  EXPECT_EQ(r.failures, 0);
+  EXPECT_LT(r.ate_rmse_m, 0.03);
+  RecordProperty("ate_rmse_m", std::to_string(r.ate_rmse_m));
+}
+
+TEST(TumFr1Xyz, FovisTracksTheFirst150Frames) {
+  if (!test::findDataset("tum_fr1_xyz")) GTEST_SKIP() << test::missingDataMessage("tum_fr1_xyz");
+  const RunResult r = runFirstFrames(FrontEndType::kFovis, 150);
+  EXPECT_EQ(r.frames, 150);
+  EXPECT_EQ(r.failures, 0);
+  EXPECT_LT(r.ate_rmse_m, 0.03);
+  RecordProperty("ate_rmse_m", std::to_string(r.ate_rmse_m));
+}
+
+}  // namespace
+}  // namespace slamd

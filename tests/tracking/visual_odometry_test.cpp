@@ -1,0 +1,194 @@
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <limits>
+
+#include <gtest/gtest.h>
+
+#include "slamd/tracking/visual_odometry.hpp"
+#include "textured_box.hpp"
+
+namespace slamd {
+namespace {
+
+CameraIntrinsics smallCamera() {
+  CameraIntrinsics K;
+  K.fx = 517.3;
+  K.fy = 516.5;
+  K.cx = 318.6;
+  K.cy = 255.3;
+  return K;
+}
+
+double rotationErrorDeg(const SE3& a, const SE3& b) {
+  return rotationAngleRad(a.linear().transpose() * b.linear()) * 180.0 / M_PI;
+}
+
+TEST(TrackingConfig, DefaultsAndValidation) {
+  Config empty = Config::fromYamlString("tracking:\n  frontend: fovis\n");
+  const TrackingConfig c = TrackingConfig::load(empty);
+  EXPECT_EQ(c.frontend, FrontEndType::kFovis);
+  EXPECT_EQ(c.max_features, TrackingConfig().max_features);
+  Config bad = Config::fromYamlString("tracking:\n  frontend: surf\n");
+  EXPECT_THROW(TrackingConfig::load(bad), ConfigError);
+  Config range = Config::fromYamlString("tracking:\n  max_features: 5\n");
+  EXPECT_THROW(TrackingConfig::load(range), ConfigError);
+  Config depth = Config::fromYamlString("tracking:\n  min_depth_m: 3.0\n  max_depth_m: 2.0\n");
+  EXPECT_THROW(TrackingConfig::load(depth), ConfigError);
+}
+
+TEST(VisualOdometry, BadInputReturnsAStatusWithoutThrowing) {
+  VisualOdometry vo;
+  RgbdFrame empty;
+  OdometryResult r;
+  ASSERT_NO_THROW(r = vo.processFrame(empty));
+  EXPECT_NE(r.status, OdometryStatus::kOk);
+  EXPECT_NO_THROW(r = vo.processFrame(RgbdFramePtr()));
+  EXPECT_NE(r.status, OdometryStatus::kOk);
+
+  RgbdFrame wrong_type;
+  wrong_type.intrinsics = smallCamera();
+  wrong_type.gray = cv::Mat(480, 640, CV_8UC1, cv::Scalar(128));
+  wrong_type.depth_m = cv::Mat(480, 640, CV_16UC1, cv::Scalar(1000));
+  r = vo.processFrame(wrong_type);
+  EXPECT_EQ(r.status, OdometryStatus::kNoDepth);
+
+  RgbdFrame wrong_size = wrong_type;
+  wrong_size.depth_m = cv::Mat(10, 10, CV_32FC1, cv::Scalar(1.0f));
+  EXPECT_EQ(vo.processFrame(wrong_size).status, OdometryStatus::kNoDepth);
+
+  RgbdFrame image_wrong_size = wrong_type;
+  image_wrong_size.gray = cv::Mat(100, 100, CV_8UC1, cv::Scalar(3));
+  EXPECT_EQ(vo.processFrame(image_wrong_size).status, OdometryStatus::kInsufficientFeatures);
+
+  // A textured image whose depth is all NaN or all zero: features but no depth.
+  const test::TexturedBox box({-2, -1.5, -1}, {2, 1.5, 3}, 1);
+  RgbdFrame nan_depth = box.render(SE3::Identity(), smallCamera());
+  nan_depth.depth_m.setTo(std::numeric_limits<float>::quiet_NaN());
+  EXPECT_EQ(vo.processFrame(nan_depth).status, OdometryStatus::kNoDepth);
+  nan_depth.depth_m.setTo(0.0f);
+  EXPECT_EQ(vo.processFrame(nan_depth).status, OdometryStatus::kNoDepth);
+
+  // Flat grey image with depth: no features.
+  RgbdFrame flat = wrong_type;
+  flat.depth_m = cv::Mat(480, 640, CV_32FC1, cv::Scalar(1.5f));
+  EXPECT_EQ(vo.processFrame(flat).status, OdometryStatus::kInsufficientFeatures);
+}
+
+/// A short smooth trajectory inside the textured box (30 Hz, about 1 cm and 0.4 degrees a frame).
+SE3 trajectoryPose(int i) {
+  const double t = i / 30.0;
+  Vector6d xi;
+  xi << 0.3 * std::sin(1.1 * t), 0.1 * std::sin(0.7 * t), 0.25 * t, 0.1 * std::sin(0.9 * t),
+      0.15 * std::sin(0.6 * t), 0.05 * t;
+  return expSE3(xi);
+}
+
+struct SequenceErrors {
+  double max_translation_m = 0.0;
+  double max_rotation_deg = 0.0;
+  double max_step_translation_m = 0.0;
+  double max_step_rotation_deg = 0.0;
+  int failures = 0;
+  int keyframes = 0;
+};
+
+SequenceErrors runSynthetic(FrontEndType frontend, int frames) {
+  TrackingConfig config;
+  config.frontend = frontend;
+  VisualOdometry vo(config);
+  const test::TexturedBox box({-2, -1.5, -1}, {2, 1.5, 3}, 42);
+  SequenceErrors e;
+  SE3 prev_true = SE3::Identity();
+  SE3 prev_est = SE3::Identity();
+  for (int i = 0; i < frames; ++i) {
+    const SE3 T_true = trajectoryPose(i);
+    RgbdFrame frame = box.render(T_true, smallCamera());
+    frame.utime = 1'000'000 + i * 33'333;
+    frame.sequence = i;
+    const OdometryResult r = vo.processFrame(frame);
+    if (r.status != OdometryStatus::kOk) ++e.failures;
+    if (r.is_keyframe) ++e.keyframes;
+    // World = first camera = identity here, so errors are direct.
+    e.max_translation_m = std::max(e.max_translation_m, (r.T_world_camera.translation() - T_true.translation()).norm());
+    e.max_rotation_deg = std::max(e.max_rotation_deg, rotationErrorDeg(r.T_world_camera, T_true));
+    if (i > 0) {
+      const SE3 step_true = prev_true.inverse() * T_true;
+      e.max_step_translation_m = std::max(e.max_step_translation_m, (r.T_prev_curr.translation() - step_true.translation()).norm());
+      e.max_step_rotation_deg = std::max(e.max_step_rotation_deg, rotationErrorDeg(r.T_prev_curr, step_true));
+      if (std::getenv("SLAMD_TRACKING_DEBUG")) {
+        std::fprintf(stderr, "%d kf=%d ref=%ld in=%d/%d rms=%.3f step_err=%.5f m %.4f deg\n", i,
+                     r.is_keyframe, static_cast<long>(r.reference_keyframe_id), r.stats.num_inliers,
+                     r.stats.num_matches, r.stats.reprojection_error_px,
+                     (r.T_prev_curr.translation() - step_true.translation()).norm(),
+                     rotationErrorDeg(r.T_prev_curr, step_true));
+      }
+      EXPECT_TRUE(r.covariance.allFinite());
+      EXPECT_GT(r.covariance.diagonal().minCoeff(), 0.0);
+    }
+    prev_true = T_true;
+    prev_est = r.T_world_camera;
+  }
+  return e;
+}
+
+TEST(VisualOdometry, OrbTracksSyntheticTexturedRoomExactly) {
+  const SequenceErrors e = runSynthetic(FrontEndType::kOrb, 30);
+  EXPECT_EQ(e.failures, 0);
+  EXPECT_GE(e.keyframes, 1);
+  EXPECT_LT(e.max_step_translation_m, 0.001);
+  EXPECT_LT(e.max_step_rotation_deg, 0.05);
+  EXPECT_LT(e.max_translation_m, 0.005);
+  EXPECT_LT(e.max_rotation_deg, 0.2);
+}
+
+TEST(VisualOdometry, FovisTracksSyntheticTexturedRoom) {
+  const SequenceErrors e = runSynthetic(FrontEndType::kFovis, 30);
+  EXPECT_EQ(e.failures, 0);
+  EXPECT_LT(e.max_step_translation_m, 0.001);
+  EXPECT_LT(e.max_step_rotation_deg, 0.05);
+  EXPECT_LT(e.max_translation_m, 0.005);
+}
+
+TEST(VisualOdometry, PredictsThroughAShortGapThenDeclaresLostAndStartsANewSegment) {
+  TrackingConfig config;
+  config.max_predicted_frames = 2;
+  VisualOdometry vo(config);
+  const test::TexturedBox box({-2, -1.5, -1}, {2, 1.5, 3}, 5);
+  int i = 0;
+  auto good = [&]() {
+    RgbdFrame f = box.render(trajectoryPose(i), smallCamera());
+    f.utime = 1'000'000 + i * 33'333;
+    ++i;
+    return vo.processFrame(f);
+  };
+  auto blind = [&]() {
+    RgbdFrame f = box.render(trajectoryPose(i), smallCamera());
+    f.utime = 1'000'000 + i * 33'333;
+    f.depth_m.setTo(std::numeric_limits<float>::quiet_NaN());
+    ++i;
+    return vo.processFrame(f);
+  };
+  EXPECT_EQ(good().segment, 0);
+  good();
+  good();
+  OdometryResult r = blind();
+  EXPECT_EQ(r.tracking_state, TrackingState::kPredicted);
+  EXPECT_EQ(r.status, OdometryStatus::kNoDepth);
+  r = good();  // recovers against the keyframe
+  EXPECT_EQ(r.status, OdometryStatus::kOk);
+  EXPECT_EQ(r.segment, 0);
+  blind();
+  blind();
+  r = blind();
+  EXPECT_EQ(r.tracking_state, TrackingState::kLost);
+  r = good();
+  EXPECT_EQ(r.status, OdometryStatus::kOk);
+  EXPECT_TRUE(r.is_keyframe);
+  EXPECT_EQ(r.segment, 1);
+  ASSERT_TRUE(r.keyframe);
+  EXPECT_EQ(r.keyframe->segment, 1);
+}
+
+}  // namespace
+}  // namespace slamd
