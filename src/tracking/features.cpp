@@ -285,6 +285,7 @@ bool alignPatch(const cv::Mat& templ, const cv::Point2f& templ_px, const cv::Mat
   constexpr int kHalf = 4;              // 9x9 patch
   constexpr int kSide = 2 * kHalf + 1;
   constexpr int kBorder = kHalf + 2;
+  constexpr double kMinCorrelation = 0.85;
   auto inside = [](const cv::Mat& img, double x, double y) {
     return x >= kBorder && y >= kBorder && x < img.cols - kBorder - 1 && y < img.rows - kBorder - 1;
   };
@@ -370,6 +371,26 @@ bool alignPatch(const cv::Mat& templ, const cv::Point2f& templ_px, const cv::Mat
     }
   }
   if (!converged || !inside(image, px, py)) return false;
+  // Accept only a patch that really looks like the template (zero-mean normalised correlation).
+  double i_mean = 0.0;
+  double iv[kSide][kSide];
+  for (int y = 0; y < kSide; ++y) {
+    for (int x = 0; x < kSide; ++x) {
+      iv[y][x] = sample(image, px + x - kHalf, py + y - kHalf);
+      i_mean += iv[y][x];
+    }
+  }
+  i_mean /= kSide * kSide;
+  double sit = 0, sii = 0, stt = 0;
+  for (int y = 0; y < kSide; ++y) {
+    for (int x = 0; x < kSide; ++x) {
+      const double a = iv[y][x] - i_mean, b = tv[y][x] - t_mean;
+      sit += a * b;
+      sii += a * a;
+      stt += b * b;
+    }
+  }
+  if (sii <= 0.0 || stt <= 0.0 || sit / std::sqrt(sii * stt) < kMinCorrelation) return false;
   if (std::hypot(px - static_cast<double>(initial_px.x), py - static_cast<double>(initial_px.y)) >
       max_shift_px) {
     return false;

@@ -197,28 +197,29 @@ std::vector<int> maximumConsistentClique(const std::vector<Correspondence>& matc
       }
     }
   }
-  auto countIn = [&](std::size_t v, const std::vector<std::uint64_t>& set) {
-    int c = 0;
+  std::vector<int> degree(n, 0);
+  for (std::size_t v = 0; v < n; ++v) {
     for (std::size_t w = 0; w < words; ++w) {
-      c += __builtin_popcountll(adjacency[v * words + w] & set[w]);
+      degree[v] += __builtin_popcountll(adjacency[v * words + w]);
     }
-    return c;
-  };
-  // Greedy: start from the vertex of highest degree, then repeatedly add the candidate connected
-  // to most other candidates; candidates are the common neighbours of the clique.
-  std::vector<std::uint64_t> all(words, ~std::uint64_t{0});
-  if (n % 64) all[words - 1] = (std::uint64_t{1} << (n % 64)) - 1;
-  std::vector<std::uint64_t> candidates = all;
+  }
+  // Greedy, as FOVIS: start from the vertex of highest degree, then repeatedly add the candidate
+  // of highest degree; candidates are the common neighbours of the clique so far.
+  std::vector<std::uint64_t> candidates(words, ~std::uint64_t{0});
+  if (n % 64) candidates[words - 1] = (std::uint64_t{1} << (n % 64)) - 1;
   std::vector<int> clique;
   while (true) {
     int best = -1;
     int best_degree = -1;
-    for (std::size_t v = 0; v < n; ++v) {
-      if (!(candidates[v / 64] >> (v % 64) & 1)) continue;
-      const int d = countIn(v, candidates);
-      if (d > best_degree) {
-        best_degree = d;
-        best = static_cast<int>(v);
+    for (std::size_t w = 0; w < words; ++w) {
+      std::uint64_t bits = candidates[w];
+      while (bits) {
+        const std::size_t v = w * 64 + static_cast<std::size_t>(__builtin_ctzll(bits));
+        bits &= bits - 1;
+        if (degree[v] > best_degree) {
+          best_degree = degree[v];
+          best = static_cast<int>(v);
+        }
       }
     }
     if (best < 0) break;
@@ -231,11 +232,14 @@ std::vector<int> maximumConsistentClique(const std::vector<Correspondence>& matc
   return clique;
 }
 
-int refinementResidual(const Correspondence& c, const CameraIntrinsics& K, const SE3& T_ref_curr,
-                       double depth_sigma_coeff, Eigen::Vector3d& residual,
-                       Eigen::Matrix<double, 3, 6>& jacobian) {
+namespace {
+
+/// refinementResidual() with the inverse transform T_curr_ref = T_ref_curr^-1 precomputed.
+int residualFromInverse(const Correspondence& c, const CameraIntrinsics& K,
+                        const SE3& T_curr_ref, double depth_sigma_coeff,
+                        Eigen::Vector3d& residual, Eigen::Matrix<double, 3, 6>& jacobian) {
   // q = T^-1 * P; with T' = T * exp(xi): q' = exp(-xi) * q ~ q - rho + [q]x phi.
-  const Eigen::Vector3d q = T_ref_curr.inverse() * c.point_ref;
+  const Eigen::Vector3d q = T_curr_ref * c.point_ref;
   if (q.z() <= 1e-6) return 0;
   const double inv_z = 1.0 / q.z();
   const double x = q.x() * inv_z;
@@ -262,6 +266,14 @@ int refinementResidual(const Correspondence& c, const CameraIntrinsics& K, const
   return 2;
 }
 
+}  // namespace
+
+int refinementResidual(const Correspondence& c, const CameraIntrinsics& K, const SE3& T_ref_curr,
+                       double depth_sigma_coeff, Eigen::Vector3d& residual,
+                       Eigen::Matrix<double, 3, 6>& jacobian) {
+  return residualFromInverse(c, K, T_ref_curr.inverse(), depth_sigma_coeff, residual, jacobian);
+}
+
 RefinementResult refinePose(const std::vector<Correspondence>& matches,
                             const std::vector<std::uint8_t>& use, const CameraIntrinsics& K,
                             const SE3& T_initial, const RefinementOptions& options) {
@@ -282,10 +294,11 @@ RefinementResult refinePose(const std::vector<Correspondence>& matches,
     Eval e;
     Eigen::Vector3d r;
     Eigen::Matrix<double, 3, 6> J;
+    const SE3 T_inv = T.inverse();
     for (std::size_t i = 0; i < matches.size(); ++i) {
       if (!use[i]) continue;
       const Correspondence& c = matches[i];
-      const int rows = refinementResidual(c, K, T, options.depth_sigma_coeff, r, J);
+      const int rows = residualFromInverse(c, K, T_inv, options.depth_sigma_coeff, r, J);
       if (rows == 0) {
         e.cost += 2.0 * k * 100.0;  // behind the camera: a large constant penalty
         continue;
@@ -331,7 +344,9 @@ RefinementResult refinePose(const std::vector<Correspondence>& matches,
     Eval next = evaluate(T_new, true);
     if (next.cost <= current.cost) {
       T = T_new;
-      const bool converged = delta.norm() < 1e-9 || current.cost - next.cost < 1e-10 * current.cost;
+      // Converged when the step is far below the noise (0.1 um, 1e-7 rad) or the cost stalls.
+      const bool converged =
+          delta.norm() < 1e-7 || current.cost - next.cost < 1e-6 * current.cost;
       current = next;
       lambda = std::max(1e-7, lambda * 0.1);
       if (converged) {

@@ -329,25 +329,23 @@ VisualOdometry::TrackAttempt VisualOdometry::track(const FeatureSet& ref,
     a.time_motion_ms = msSince(t0);
     return a;
   }
-  recheck(refined.T_ref_curr);
-  refined = refinePose(matches, inliers, K, refined.T_ref_curr, options);
-  if (refined.success && config_.refine_search_radius_px > 0.0) {
+  if (config_.refine_search_radius_px <= 0.0) {
+    recheck(refined.T_ref_curr);
+    refined = refinePose(matches, inliers, K, refined.T_ref_curr, options);
+  } else {
     // Second, tighter guided search with the estimated motion: more (and surer) matches.
     std::vector<Correspondence> more;
     const std::int64_t tm = steadyNowNs();
     matchGuided(ref, refined.T_ref_curr, curr, config_.refine_search_radius_px, more);
     a.time_matching_ms += msSince(tm);
+    // Too few matches in the tight window means a doubtful estimate: keep the first matches.
     if (more.size() >= matches.size() / 2) {
       matches.swap(more);
       inliers.assign(matches.size(), 0);
       a.num_matches = static_cast<int>(matches.size());
-      recheck(refined.T_ref_curr);
-      refined = refinePose(matches, inliers, K, refined.T_ref_curr, options);
-      if (refined.success) {
-        recheck(refined.T_ref_curr);
-        refined = refinePose(matches, inliers, K, refined.T_ref_curr, options);
-      }
     }
+    recheck(refined.T_ref_curr);
+    refined = refinePose(matches, inliers, K, refined.T_ref_curr, options);
   }
   if (refined.success && config_.patch_refinement) {
     // Align each inlier's reference patch in the current image: the correspondences become
@@ -371,11 +369,8 @@ VisualOdometry::TrackAttempt VisualOdometry::track(const FeatureSet& ref,
     }
     recheck(refined.T_ref_curr);
     refined = refinePose(matches, inliers, K, refined.T_ref_curr, options);
-    if (refined.success) {
-      recheck(refined.T_ref_curr);
-      refined = refinePose(matches, inliers, K, refined.T_ref_curr, options);
-    }
   }
+  if (refined.success) recheck(refined.T_ref_curr);
   a.time_motion_ms = msSince(t0);
   if (!refined.success) {
     a.status = OdometryStatus::kOptimizationFailure;
