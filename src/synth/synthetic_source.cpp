@@ -112,7 +112,7 @@ FrameRead SyntheticSource::next(std::chrono::milliseconds /*timeout*/) {
   }
   read.frame = renderFrame(position_++);
   read.status = FrameRead::Status::kFrame;
-  ++stats_.frames_read;
+  counters_.frameRead();
   return read;
 }
 

@@ -34,6 +34,7 @@
 
 #include "slamd/capture/camera_config.hpp"
 #include "slamd/capture/frame_source.hpp"
+#include "slamd/capture/source_support.hpp"
 #include "slamd/synth/motion.hpp"
 #include "slamd/synth/renderer.hpp"
 #include "slamd/synth/scene.hpp"
@@ -64,7 +65,7 @@ class SyntheticSource : public FrameSource {
   void open() override;
   FrameRead next(std::chrono::milliseconds timeout) override;
   void close() override;
-  FrameSourceStats stats() const override { return stats_; }
+  FrameSourceStats stats() const override { return counters_.snapshot(); }
   std::string description() const override;
   bool isLive() const override { return false; }
   std::optional<CameraIntrinsics> intrinsics() const override {
@@ -94,7 +95,7 @@ class SyntheticSource : public FrameSource {
   Trajectory ground_truth_;
   int position_ = 0;
   bool open_ = false;
-  FrameSourceStats stats_;
+  SourceCounters counters_;  ///< read by other threads through stats()
 };
 
 /// The factory behind `synthetic:SCENE`: `scene` is corridor | corridor_loop | room. Reads the
