@@ -17,6 +17,7 @@
 #include <opencv2/core.hpp>
 
 #include "slamd/capture/tum_source.hpp"
+#include "slamd/synth/synthetic_source.hpp"
 #include "slamd/common/log.hpp"
 #include "slamd/common/program_options.hpp"
 #include "slamd/common/time.hpp"
@@ -40,28 +41,33 @@ double threadCpuMs() {
 int main(int argc, char** argv) {
   ProgramOptions options("slamd-odometry-run",
                          "Runs visual odometry over a sequence and reports ATE, RPE and timing.");
-  options.addOption("source", "SOURCE", "tum:DIR", "tum:" SLAMD_SOURCE_DIR "/../shared/data/tum_fr1_xyz");
+  options.addOption("source", "SOURCE", "tum:DIR or synthetic:SCENE (room, corridor, ...)",
+                    "tum:" SLAMD_SOURCE_DIR "/../shared/data/tum_fr1_xyz");
   options.addOption("trajectory", "FILE", "write the estimated trajectory (TUM format)");
   options.addOption("max-frames", "N", "stop after N frames (0 = all)", "0");
   if (!options.parse(argc, argv)) return options.exitCode();
   cv::setNumThreads(1);
 
+  const std::string spec = options.value("source");
+  const bool synthetic = spec.rfind("synthetic:", 0) == 0;
   Config config;
   TrackingConfig tracking;
-  TumSourceConfig source_config;
-  std::string folder = options.value("source");
+  std::unique_ptr<FrameSource> source;
   try {
-    config = options.loadConfig(SLAMD_SOURCE_DIR "/config/tum_fr1.yaml");
+    config = options.loadConfig(synthetic ? SLAMD_SOURCE_DIR "/config/synthetic.yaml"
+                                          : SLAMD_SOURCE_DIR "/config/tum_fr1.yaml");
     tracking = TrackingConfig::load(config);
-    source_config = TumSourceConfig::load(config);
+    if (synthetic) {
+      source = createSyntheticSource(spec.substr(10), config);
+    } else {
+      const std::string folder = spec.rfind("tum:", 0) == 0 ? spec.substr(4) : spec;
+      source = std::make_unique<TumSource>(folder, TumSourceConfig::load(config));
+    }
+    reportConfig(config, "slamd-odometry-run");
+    source->open();
   } catch (const ConfigError& e) {
     std::cerr << e.what() << "\n";
     return kExitConfigError;
-  }
-  if (folder.rfind("tum:", 0) == 0) folder = folder.substr(4);
-  TumSource source(folder, source_config);
-  try {
-    source.open();
   } catch (const SourceError& e) {
     std::cerr << e.what() << "\n";
     return kExitSourceError;
@@ -77,7 +83,7 @@ int main(int argc, char** argv) {
   int frames = 0, failures = 0, keyframes = 0, lost = 0;
   double inliers_sum = 0.0;
   while (max_frames <= 0 || frames < max_frames) {
-    FrameRead read = source.next(std::chrono::milliseconds(1000));
+    FrameRead read = source->next(std::chrono::milliseconds(1000));
     if (read.status == FrameRead::Status::kEndOfStream) break;
     if (read.status != FrameRead::Status::kFrame) continue;
     const double cpu_start_ms = threadCpuMs();
@@ -94,10 +100,11 @@ int main(int argc, char** argv) {
     inliers_sum += r.stats.num_inliers;
     estimate.push_back({utimeToSeconds(r.utime), r.T_world_camera});
   }
-  source.close();
+  source->close();
 
   eval::MetricsReport report("slamd-odometry-run");
   report.setText("frontend", frontEndName(tracking.frontend));
+  report.setText("source", spec);
   report.set("frames", frames);
   report.set("failed_frames_count", failures);
   report.set("lost_frames_count", lost);
@@ -124,7 +131,7 @@ int main(int argc, char** argv) {
       return kExitOutputError;
     }
   }
-  if (const auto gt = source.groundTruth(); gt && !gt->empty() && estimate.size() > 2) {
+  if (const auto gt = source->groundTruth(); gt && !gt->empty() && estimate.size() > 2) {
     try {
       const eval::AteResult ate = eval::computeAte(*gt, estimate);
       const eval::RpeResult rpe = eval::computeRpe(*gt, estimate);
