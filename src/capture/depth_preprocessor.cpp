@@ -4,6 +4,8 @@
 #include <limits>
 #include <vector>
 
+#include <opencv2/core.hpp>
+
 #include "slamd/common/time.hpp"
 
 namespace slamd {
@@ -75,51 +77,39 @@ int DepthPreprocessor::rangeGate(cv::Mat& depth_m) const {
 }
 
 int DepthPreprocessor::removeFlyingPixels(cv::Mat& depth_m) {
-  // Decisions are made on an unmodified copy so that removals do not cascade.
-  depth_m.copyTo(scratch_);
+  // Decisions are made on a copy padded with one NaN pixel on each side, so that removals do not
+  // cascade and the border needs no special case (NaN neighbours are ignored).
   const float nan = std::numeric_limits<float>::quiet_NaN();
-  const auto ratio = static_cast<float>(config_.jump_ratio);
+  cv::copyMakeBorder(depth_m, scratch_, 1, 1, 1, 1, cv::BORDER_CONSTANT, cv::Scalar(nan));
+  const float ratio = static_cast<float>(config_.jump_ratio);
+  const int min_support = config_.min_support;
   const int rows = depth_m.rows;
   const int cols = depth_m.cols;
   int removed = 0;
   for (int r = 0; r < rows; ++r) {
-    const float* above = scratch_.ptr<float>(r > 0 ? r - 1 : r);
-    const float* here = scratch_.ptr<float>(r);
-    const float* below = scratch_.ptr<float>(r + 1 < rows ? r + 1 : r);
+    const float* above = scratch_.ptr<float>(r) + 1;
+    const float* here = scratch_.ptr<float>(r + 1) + 1;
+    const float* below = scratch_.ptr<float>(r + 2) + 1;
     auto* out = depth_m.ptr<float>(r);
+    // Branch-free so that the compiler vectorises it: comparisons with NaN are false, so missing
+    // neighbours (and a missing centre) count nowhere.
     for (int c = 0; c < cols; ++c) {
       const float z = here[c];
-      if (!(z > 0.0f)) continue;  // NaN or non-positive
       const float jump = ratio * z;
+      const float neighbours[8] = {above[c - 1], above[c], above[c + 1], here[c - 1],
+                                   here[c + 1],  below[c - 1], below[c], below[c + 1]};
       bool nearer = false;
       bool farther = false;
       int support = 0;
-      int neighbours = 0;
-      const int c0 = c > 0 ? c - 1 : c;
-      const int c1 = c + 1 < cols ? c + 1 : c;
-      const float* lines[3] = {r > 0 ? above : nullptr, here, r + 1 < rows ? below : nullptr};
-      for (const float* line : lines) {
-        if (line == nullptr) continue;
-        for (int k = c0; k <= c1; ++k) {
-          if (line == here && k == c) continue;
-          const float zn = line[k];
-          if (!(zn > 0.0f)) continue;
-          ++neighbours;
-          const float d = zn - z;
-          if (d > jump) {
-            farther = true;
-          } else if (d < -jump) {
-            nearer = true;
-          } else {
-            ++support;
-          }
-        }
+      for (const float zn : neighbours) {
+        const float d = zn - z;
+        farther |= d > jump;
+        nearer |= d < -jump;
+        support += (d <= jump) & (d >= -jump);
       }
-      if ((nearer && farther) || (neighbours > 0 && support < config_.min_support) ||
-          (neighbours == 0 && config_.min_support > 0)) {
-        out[c] = nan;
-        ++removed;
-      }
+      const bool remove = (z > 0.0f) & ((nearer & farther) | (support < min_support));
+      removed += remove;
+      out[c] = remove ? nan : out[c];
     }
   }
   return removed;
@@ -137,23 +127,29 @@ void DepthPreprocessor::bilateral(cv::Mat& depth_m) {
           static_cast<float>(std::exp(-(dx * dx + dy * dy) / two_sigma2));
     }
   }
+  // Range weight exp(-u^2 / 2) tabulated over u = |d| / sigma in [0, 3); neighbours beyond 3 sigma
+  // (weight < 1.2%) are left out. The table step (3/256 sigma) is far below depth noise.
+  constexpr int kTable = 256;
+  constexpr float kMaxU = 3.0f;
+  float range_table[kTable];
+  for (int i = 0; i < kTable; ++i) {
+    const double u = (i + 0.5) * static_cast<double>(kMaxU) / kTable;
+    range_table[i] = static_cast<float>(std::exp(-0.5 * u * u));
+  }
   const auto ratio = static_cast<float>(config_.range_sigma_ratio);
   const int rows = depth_m.rows;
   const int cols = depth_m.cols;
   for (int r = 0; r < rows; ++r) {
     auto* out = depth_m.ptr<float>(r);
     const float* centre_row = scratch_.ptr<float>(r);
+    const int r0 = r - radius < 0 ? 0 : r - radius;
+    const int r1 = r + radius >= rows ? rows - 1 : r + radius;
     for (int c = 0; c < cols; ++c) {
       const float z = centre_row[c];
       if (!(z > 0.0f)) continue;
-      const float sigma = ratio * z;
-      const float inv_two_sigma2 = 1.0f / (2.0f * sigma * sigma);
-      // Neighbours beyond 3 sigma contribute < 1.2% weight: skip them (and the exp) outright.
-      const float cutoff = 3.0f * sigma;
+      const float to_index = kTable / (kMaxU * ratio * z);  // |d| -> table index
       float weight_sum = 0.0f;
       float value_sum = 0.0f;
-      const int r0 = r - radius < 0 ? 0 : r - radius;
-      const int r1 = r + radius >= rows ? rows - 1 : r + radius;
       const int c0 = c - radius < 0 ? 0 : c - radius;
       const int c1 = c + radius >= cols ? cols - 1 : c + radius;
       for (int rr = r0; rr <= r1; ++rr) {
@@ -161,14 +157,14 @@ void DepthPreprocessor::bilateral(cv::Mat& depth_m) {
         const float* weights = &spatial[static_cast<std::size_t>((rr - r + radius) * size)];
         for (int cc = c0; cc <= c1; ++cc) {
           const float zn = line[cc];
-          const float d = zn - z;
-          if (!(std::abs(d) < cutoff)) continue;  // also skips NaN
-          const float w = weights[cc - c + radius] * std::exp(-d * d * inv_two_sigma2);
+          const float index = std::abs(zn - z) * to_index;
+          if (!(index < static_cast<float>(kTable))) continue;  // beyond 3 sigma, or NaN
+          const float w = weights[cc - c + radius] * range_table[static_cast<int>(index)];
           weight_sum += w;
           value_sum += w * zn;
         }
       }
-      out[c] = value_sum / weight_sum;  // the centre always contributes (weight 1)
+      out[c] = value_sum / weight_sum;  // the centre always contributes
     }
   }
 }

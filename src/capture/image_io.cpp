@@ -62,6 +62,8 @@ bool decodeJpegInto(const std::uint8_t* data, std::size_t size, cv::Mat& out,
     return false;
   }
   info.out_color_space = JCS_EXT_BGR;
+  // The fast integer DCT: within about a grey level of the exact one, and faster.
+  info.dct_method = JDCT_IFAST;
   jpeg_start_decompress(&info);
   out.create(static_cast<int>(info.output_height), static_cast<int>(info.output_width), CV_8UC3);
   while (info.output_scanline < info.output_height) {

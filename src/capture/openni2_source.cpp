@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <cstdlib>
+#include <filesystem>
 #include <mutex>
 #include <sstream>
 #include <thread>
@@ -137,6 +138,10 @@ std::vector<std::string> listOpenNi2Devices() {
   openni::OpenNI::enumerateDevices(&devices);
   std::vector<std::string> out;
   for (int i = 0; i < devices.getSize(); ++i) {
+    // OpenNI lists every device it has opened, including the DummyDevice and .oni files.
+    const std::string uri = devices[i].getUri();
+    std::error_code error;
+    if (uri == "Dummy" || std::filesystem::exists(uri, error)) continue;
     out.push_back(std::string(devices[i].getUri()) + " (" + devices[i].getVendor() + " " +
                   devices[i].getName() + ")");
   }

@@ -204,7 +204,9 @@ TEST(ImageIo, StrictJpegMatchesOpenCvOnAGoodImage) {
   const cv::Mat ours = decodeColorImage(bytes.data(), bytes.size(), error);
   const cv::Mat opencv = cv::imdecode(bytes, cv::IMREAD_COLOR);
   ASSERT_FALSE(ours.empty()) << error;
-  EXPECT_LE(cv::norm(ours, opencv, cv::NORM_INF), 2.0);
+  // The fast integer DCT: about a grey level on average, a few at most.
+  EXPECT_LT(cv::norm(ours, opencv, cv::NORM_L1) / static_cast<double>(ours.total() * 3), 1.5);
+  EXPECT_LE(cv::norm(ours, opencv, cv::NORM_INF), 8.0);
 }
 
 }  // namespace

@@ -94,6 +94,25 @@ TEST(OpenNi2Source, DISABLED_OniRecordedFromTheDummyDevicePlaysBackOnceCompletel
   }
 }
 
+TEST(OpenNi2Source, DeviceThatStopsDeliveringIsReportedAndReopened) {
+  OpenNi2Config config = defaultConfig();
+  // The DummyDevice sends a frame every 33 ms: a 5 ms frame timeout makes every gap look like a
+  // disconnect, which exercises detection, close and reopen on a real driver.
+  config.frame_timeout_s = 0.005;
+  config.reconnect_initial_s = 0.01;
+  OpenNi2Source source(OpenNi2Source::Kind::kDevice, "Dummy", config);
+  source.open();
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(20);
+  while (source.stats().reconnects < 2 && std::chrono::steady_clock::now() < deadline) {
+    const FrameRead read = source.next(std::chrono::milliseconds(50));
+    ASSERT_NE(read.status, FrameRead::Status::kEndOfStream) << "a device never ends";
+  }
+  const FrameSourceStats stats = source.stats();
+  EXPECT_GE(stats.reconnects, 2u);
+  EXPECT_NE(stats.last_error.find("disconnected"), std::string::npos) << stats.last_error;
+  source.close();
+}
+
 TEST(OpenNi2Source, MissingOniFileIsASourceErrorNamingIt) {
   OpenNi2Source source(OpenNi2Source::Kind::kFile, "/nonexistent/recording.oni", defaultConfig());
   try {
@@ -105,8 +124,10 @@ TEST(OpenNi2Source, MissingOniFileIsASourceErrorNamingIt) {
 }
 
 TEST(OpenNi2Source, RealDeviceDeliversFramesWhenAttached) {
-  if (listOpenNi2Devices().empty()) GTEST_SKIP() << "no OpenNI2 device attached; skipping";
-  OpenNi2Source source(OpenNi2Source::Kind::kDevice, "", defaultConfig());
+  const auto devices = listOpenNi2Devices();
+  if (devices.empty()) GTEST_SKIP() << "no OpenNI2 device attached; skipping";
+  const std::string uri = devices.front().substr(0, devices.front().find(' '));
+  OpenNi2Source source(OpenNi2Source::Kind::kDevice, uri, defaultConfig());
   source.open();
   int frames = 0;
   for (int i = 0; i < 100 && frames < 10; ++i) {

@@ -57,7 +57,7 @@ struct OpenNi2Config {
   static OpenNi2Config load(Config& config);
 };
 
-/// Names OpenNI2 devices currently attached (URI and name), for messages and tools.
+/// OpenNI2 hardware currently attached, as "URI (vendor name)" (not the DummyDevice or files).
 std::vector<std::string> listOpenNi2Devices();
 
 /// Writes an .oni recording of `frame_count` frame pairs from an OpenNI2 device (used by tests

@@ -50,6 +50,7 @@ class PacedSource : public FrameSource {
   std::optional<Trajectory> groundTruth() const override { return inner_->groundTruth(); }
 
   FrameSource& inner() { return *inner_; }
+  const FrameSource& inner() const { return *inner_; }
 
  private:
   std::chrono::steady_clock::time_point dueTime(const RgbdFrame& frame) const;

@@ -1,0 +1,103 @@
+#pragma once
+// LcmFrameSource: frames received on an LCM channel (`lcm:CHANNEL`), as slamd.rgbd_frame_t or
+// kinect.frame_msg_t (the openhumanoids kinect-lcm driver's KINECT_FRAME), live or from
+// `lcm-logplayer`.
+//
+//   LcmFrameSource source("SLAMD_FRAMES", LcmFrameSourceConfig::load(config));
+//   source.open();                      // throws SourceError when LCM cannot start (bad URL)
+//   FrameRead read = source.next(100ms);
+//   source.close();                     // stops and joins the receive thread
+//
+// Threads: open() starts one receive thread that only copies raw message bytes into a
+// DropOldestQueue (capacity capture.lcm.queue_capacity): a slow consumer never blocks LCM, the
+// oldest waiting message is evicted and counted in stats().frames_dropped. next() runs on the
+// capture thread: it identifies the type by its fingerprint (capture.lcm.format: auto, rgbd or
+// kinect), decodes it with decodeMessage<T> (so malformed messages are counted, never thrown),
+// then decodes the images (JPEG/PNG/raw colour, PNG/zlib/raw depth). Any failure skips the
+// message with a sentence naming the channel, the message number and what is wrong.
+// Kinect messages carry no intrinsics: camera.* supplies them (scaled to the message's size).
+//
+// End of stream: a live channel never ends; with capture.lcm.idle_end_s > 0 the source ends once
+// it has received something and then heard nothing for that long (replaying a log to the end).
+
+#include <atomic>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "slamd/capture/camera_config.hpp"
+#include "slamd/capture/frame_source.hpp"
+#include "slamd/capture/source_support.hpp"
+#include "slamd/pipeline/drop_oldest_queue.hpp"
+#include "slamd/pipeline/wake_signal.hpp"
+
+namespace lcm {
+class LCM;
+class Subscription;
+struct ReceiveBuffer;
+}  // namespace lcm
+
+namespace slamd {
+
+enum class LcmFrameFormat { kAuto, kRgbdFrame, kKinectFrame };
+
+struct LcmFrameSourceConfig {
+  std::string url;                           ///< capture.lcm.url ("" = LCM's default)
+  LcmFrameFormat format = LcmFrameFormat::kAuto;  ///< capture.lcm.format: auto|rgbd|kinect
+  int queue_capacity = 4;                    ///< capture.lcm.queue_capacity, messages, 1..1000
+  double idle_end_s = 0.0;                   ///< capture.lcm.idle_end_s, 0 = never, [0, 3600]
+  CameraConfig camera;                       ///< camera.*, for kinect.frame_msg_t
+
+  static LcmFrameSourceConfig load(Config& config);
+};
+
+class LcmFrameSource : public FrameSource {
+ public:
+  LcmFrameSource(std::string channel, LcmFrameSourceConfig config);
+  /// Receives through an existing LCM instance (e.g. memq:// shared with a publisher in tests);
+  /// capture.lcm.url is then ignored. The receive thread calls lcm->handleTimeout(), so nothing
+  /// else may handle this instance while the source is open.
+  LcmFrameSource(std::shared_ptr<lcm::LCM> lcm, std::string channel, LcmFrameSourceConfig config);
+  ~LcmFrameSource() override;
+  LcmFrameSource(const LcmFrameSource&) = delete;
+  LcmFrameSource& operator=(const LcmFrameSource&) = delete;
+
+  void open() override;
+  FrameRead next(std::chrono::milliseconds timeout) override;
+  void close() override;
+  FrameSourceStats stats() const override;
+  std::string description() const override;
+  bool isLive() const override { return true; }
+
+  /// Messages the receive thread has taken from LCM (any type, good or bad).
+  std::uint64_t messagesReceived() const { return received_.load(std::memory_order_relaxed); }
+
+ private:
+  struct RawMessage {
+    std::vector<std::uint8_t> bytes;
+    std::uint64_t number = 0;  ///< 1-based count of messages on this channel
+  };
+
+  void onMessage(const lcm::ReceiveBuffer* buffer, const std::string& channel);
+  void receiveLoop();
+  FrameRead decode(const RawMessage& message);
+
+  std::string channel_;
+  LcmFrameSourceConfig config_;
+  std::shared_ptr<lcm::LCM> shared_lcm_;  ///< given by the caller, or null
+  std::shared_ptr<lcm::LCM> lcm_;         ///< in use while open
+  lcm::Subscription* subscription_ = nullptr;
+  std::thread thread_;
+  std::atomic<bool> stop_{false};
+  std::unique_ptr<DropOldestQueue<RawMessage>> queue_;
+  WakeSignal arrived_;
+  std::atomic<std::uint64_t> received_{0};
+  std::atomic<std::int64_t> last_arrival_ns_{0};
+  std::int64_t sequence_ = 0;
+  SourceCounters counters_;
+  FrameGate gate_;
+};
+
+}  // namespace slamd

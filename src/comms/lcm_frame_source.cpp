@@ -1,0 +1,187 @@
+#include "slamd/comms/lcm_frame_source.hpp"
+
+#include <lcm/lcm-cpp.hpp>
+
+#include <cstdio>
+
+#include "slamd/common/log.hpp"
+#include "slamd/comms/frame_codec.hpp"
+#include "slamd/comms/message_codec.hpp"
+
+namespace slamd {
+
+namespace {
+
+constexpr const char* kComponent = "capture.lcm";
+
+// LCM encodes a message's type fingerprint as its first 8 bytes, big-endian.
+bool hasFingerprint(const std::vector<std::uint8_t>& bytes, std::int64_t hash) {
+  if (bytes.size() < 8) return false;
+  std::uint64_t value = 0;
+  for (int i = 0; i < 8; ++i) value = (value << 8) | bytes[static_cast<std::size_t>(i)];
+  return static_cast<std::int64_t>(value) == hash;
+}
+
+std::string fingerprintText(const std::vector<std::uint8_t>& bytes) {
+  std::string text = "0x";
+  char hex[3];
+  for (std::size_t i = 0; i < 8 && i < bytes.size(); ++i) {
+    std::snprintf(hex, sizeof(hex), "%02x", bytes[i]);
+    text += hex;
+  }
+  return text;
+}
+
+}  // namespace
+
+LcmFrameSourceConfig LcmFrameSourceConfig::load(Config& config) {
+  LcmFrameSourceConfig out;
+  out.url = config.getString("capture.lcm.url", out.url);
+  const std::string format =
+      config.getChoice("capture.lcm.format", "auto", {"auto", "rgbd", "kinect"});
+  out.format = format == "rgbd"     ? LcmFrameFormat::kRgbdFrame
+               : format == "kinect" ? LcmFrameFormat::kKinectFrame
+                                    : LcmFrameFormat::kAuto;
+  out.queue_capacity = config.getInt("capture.lcm.queue_capacity", out.queue_capacity, 1, 1000);
+  out.idle_end_s = config.getDouble("capture.lcm.idle_end_s", out.idle_end_s, 0.0, 3600.0);
+  out.camera = CameraConfig::load(config, 1000.0);
+  return out;
+}
+
+LcmFrameSource::LcmFrameSource(std::string channel, LcmFrameSourceConfig config)
+    : channel_(std::move(channel)), config_(std::move(config)) {}
+
+LcmFrameSource::LcmFrameSource(std::shared_ptr<lcm::LCM> lcm, std::string channel,
+                               LcmFrameSourceConfig config)
+    : channel_(std::move(channel)), config_(std::move(config)), shared_lcm_(std::move(lcm)) {}
+
+LcmFrameSource::~LcmFrameSource() { close(); }
+
+void LcmFrameSource::open() {
+  close();
+  lcm_ = shared_lcm_ ? shared_lcm_ : std::make_shared<lcm::LCM>(config_.url);
+  if (!lcm_->good()) {
+    lcm_.reset();
+    throw SourceError("cannot start LCM with URL '" + config_.url +
+                      "' (check capture.lcm.url / --lcm-url and that multicast is routed)");
+  }
+  queue_ = std::make_unique<DropOldestQueue<RawMessage>>(
+      static_cast<std::size_t>(config_.queue_capacity));
+  subscription_ = lcm_->subscribe(channel_, &LcmFrameSource::onMessage, this);
+  stop_.store(false, std::memory_order_relaxed);
+  received_.store(0, std::memory_order_relaxed);
+  last_arrival_ns_.store(0, std::memory_order_relaxed);
+  gate_.reset();
+  thread_ = std::thread([this] { receiveLoop(); });
+  SLAMD_LOG_INFO(kComponent) << "listening on " << description();
+}
+
+void LcmFrameSource::receiveLoop() {
+  // handleTimeout bounds each wait so that close() is noticed within 50 ms.
+  while (!stop_.load(std::memory_order_acquire)) {
+    if (lcm_->handleTimeout(50) < 0) {
+      counters_.failure(kComponent, "LCM receive failed on " + channel_);
+      break;
+    }
+  }
+}
+
+void LcmFrameSource::onMessage(const lcm::ReceiveBuffer* buffer, const std::string& /*channel*/) {
+  // Receive thread: copy only. Decoding happens on the capture thread, after the drop-oldest
+  // queue, so a slow consumer costs nothing here and never delays LCM's socket.
+  RawMessage message;
+  const auto* data = static_cast<const std::uint8_t*>(buffer->data);
+  message.bytes.assign(data, data + buffer->data_size);
+  message.number = received_.fetch_add(1, std::memory_order_relaxed) + 1;
+  last_arrival_ns_.store(steadyNowNs(), std::memory_order_relaxed);
+  queue_->push(std::move(message));
+  arrived_.notify();
+}
+
+FrameRead LcmFrameSource::next(std::chrono::milliseconds timeout) {
+  if (!queue_) return FrameRead{FrameRead::Status::kEndOfStream, {}, {}};
+  const auto deadline = std::chrono::steady_clock::now() + timeout;
+  while (true) {
+    const auto seen = arrived_.epoch();
+    if (std::optional<RawMessage> message = queue_->tryPop()) return decode(*message);
+    if (config_.idle_end_s > 0.0) {
+      const std::int64_t last = last_arrival_ns_.load(std::memory_order_relaxed);
+      if (last != 0 && steadyNowNs() - last > static_cast<std::int64_t>(config_.idle_end_s * 1e9)) {
+        return FrameRead{FrameRead::Status::kEndOfStream, {}, {}};
+      }
+    }
+    if (std::chrono::steady_clock::now() >= deadline) {
+      return FrameRead{FrameRead::Status::kTimeout, {}, {}};
+    }
+    auto wake = deadline;
+    if (config_.idle_end_s > 0.0) {
+      // Wake up in time to notice the idle end.
+      wake = std::min(wake, std::chrono::steady_clock::now() + std::chrono::milliseconds(20));
+    }
+    arrived_.waitFor(seen, wake);
+  }
+}
+
+FrameRead LcmFrameSource::decode(const RawMessage& message) {
+  const std::string what =
+      "LCM message #" + std::to_string(message.number) + " on " + channel_;
+  const bool is_rgbd = hasFingerprint(message.bytes, slamd::rgbd_frame_t::getHash());
+  const bool is_kinect = hasFingerprint(message.bytes, kinect::frame_msg_t::getHash());
+  const bool want_rgbd = config_.format != LcmFrameFormat::kKinectFrame;
+  const bool want_kinect = config_.format != LcmFrameFormat::kRgbdFrame;
+  std::shared_ptr<RgbdFrame> frame;
+  std::string error;
+  try {
+    if (is_rgbd && want_rgbd) {
+      auto decoded = decodeMessage<slamd::rgbd_frame_t>(message.bytes.data(), message.bytes.size(),
+                                                        &error);
+      if (!decoded) return skipFrame(counters_, kComponent, what + ": " + error);
+      frame = std::make_shared<RgbdFrame>(decodeRgbdFrame(*decoded));
+    } else if (is_kinect && want_kinect) {
+      auto decoded = decodeMessage<kinect::frame_msg_t>(message.bytes.data(), message.bytes.size(),
+                                                        &error);
+      if (!decoded) return skipFrame(counters_, kComponent, what + ": " + error);
+      frame = std::make_shared<RgbdFrame>(decodeKinectFrame(*decoded, config_.camera.intrinsics));
+    } else {
+      std::string expected = config_.format == LcmFrameFormat::kRgbdFrame ? "slamd.rgbd_frame_t"
+                             : config_.format == LcmFrameFormat::kKinectFrame
+                                 ? "kinect.frame_msg_t"
+                                 : "slamd.rgbd_frame_t or kinect.frame_msg_t";
+      return skipFrame(counters_, kComponent,
+                       what + ": " + std::to_string(message.bytes.size()) +
+                           " bytes with type fingerprint " + fingerprintText(message.bytes) +
+                           " are not " + expected);
+    }
+  } catch (const std::exception& e) {
+    // FrameDecodeError (inconsistent fields, corrupt images) and anything the decoders throw.
+    return skipFrame(counters_, kComponent, what + ": " + e.what());
+  }
+  frame->received_steady_ns = steadyNowNs();
+  if (frame->sequence == 0) frame->sequence = sequence_;
+  ++sequence_;
+  const std::string gate_error = gate_.check(*frame, what);
+  if (!gate_error.empty()) return skipFrame(counters_, kComponent, gate_error);
+  counters_.frameRead();
+  return FrameRead{FrameRead::Status::kFrame, std::move(frame), {}};
+}
+
+void LcmFrameSource::close() {
+  stop_.store(true, std::memory_order_release);
+  if (thread_.joinable()) thread_.join();
+  if (queue_) queue_->close();
+  if (lcm_ && subscription_ != nullptr) lcm_->unsubscribe(subscription_);
+  subscription_ = nullptr;
+  lcm_.reset();
+}
+
+FrameSourceStats LcmFrameSource::stats() const {
+  FrameSourceStats stats = counters_.snapshot();
+  if (queue_) stats.frames_dropped += queue_->dropped();
+  return stats;
+}
+
+std::string LcmFrameSource::description() const {
+  return "lcm:" + channel_ + (config_.url.empty() ? std::string() : " (" + config_.url + ")");
+}
+
+}  // namespace slamd
