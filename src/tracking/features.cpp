@@ -342,10 +342,13 @@ bool alignPatch(const cv::Mat& templ, const cv::Point2f& templ_px, const cv::Mat
   if (det < 1e-6 * (h00 + h11) * (h00 + h11) || h00 + h11 < 1.0) return false;
   double px = initial_px.x, py = initial_px.y;
   bool converged = false;
+  double last[kSide][kSide];
+  double last_mean = 0.0;
   for (int it = 0; it < 10; ++it) {
     if (!inside(image, px, py)) return false;
-    double iv[kSide][kSide];
-    double i_mean = 0.0;
+    double (&iv)[kSide][kSide] = last;
+    double& i_mean = last_mean;
+    i_mean = 0.0;
     for (int y = 0; y < kSide; ++y) {
       for (int x = 0; x < kSide; ++x) {
         iv[y][x] = sample(image, px + x - kHalf, py + y - kHalf);
@@ -365,26 +368,18 @@ bool alignPatch(const cv::Mat& templ, const cv::Point2f& templ_px, const cv::Mat
     const double dy = (h00 * b1 - h01 * b0) / det;
     px -= dx;
     py -= dy;
-    if (dx * dx + dy * dy < 1e-4) {
+    if (dx * dx + dy * dy < 1e-3) {
       converged = true;
       break;
     }
   }
   if (!converged || !inside(image, px, py)) return false;
-  // Accept only a patch that really looks like the template (zero-mean normalised correlation).
-  double i_mean = 0.0;
-  double iv[kSide][kSide];
-  for (int y = 0; y < kSide; ++y) {
-    for (int x = 0; x < kSide; ++x) {
-      iv[y][x] = sample(image, px + x - kHalf, py + y - kHalf);
-      i_mean += iv[y][x];
-    }
-  }
-  i_mean /= kSide * kSide;
+  // Accept only a patch that really looks like the template (zero-mean normalised correlation,
+  // on the last iteration's samples, a hundredth of a pixel away).
   double sit = 0, sii = 0, stt = 0;
   for (int y = 0; y < kSide; ++y) {
     for (int x = 0; x < kSide; ++x) {
-      const double a = iv[y][x] - i_mean, b = tv[y][x] - t_mean;
+      const double a = last[y][x] - last_mean, b = tv[y][x] - t_mean;
       sit += a * b;
       sii += a * a;
       stt += b * b;

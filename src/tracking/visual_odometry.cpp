@@ -390,68 +390,59 @@ VisualOdometry::TrackAttempt VisualOdometry::track(const FeatureSet& ref,
 
 SE3 VisualOdometry::alignRotation(const cv::Mat& small_curr, const CameraIntrinsics& K_full) const {
   // FOVIS's initial rotation: minimise the photometric error between the blurred 80x60 images of
-  // the previous and current frames over a pure rotation R_prev_curr (pixels warp by K R K^-1).
+  // the previous and current frames over a pure rotation R_prev_curr (pixels warp by K R K^-1):
+  //   sum_x (I_curr(x) - I_prev(pi(K R K^-1 x)))^2.
+  // Inverse compositional Gauss-Newton: the Jacobian uses the current image's gradient at the
+  // identity warp, so it and the normal matrix are computed once; R <- R * exp(-delta).
   SE3 T = SE3::Identity();
   if (have_velocity_) T.linear() = velocity_prev_curr_.linear();
   if (prev_small_.empty() || prev_small_.size() != small_curr.size()) return T;
   const CameraIntrinsics K = K_full.scaled(small_curr.cols, small_curr.rows);
-  cv::Mat gx, gy;
-  cv::Sobel(prev_small_, gx, CV_32F, 1, 0, 3, 1.0 / 8.0);
-  cv::Sobel(prev_small_, gy, CV_32F, 0, 1, 3, 1.0 / 8.0);
-  Eigen::Matrix3d R = T.linear();
-  auto cost = [&](const Eigen::Matrix3d& Rc, Eigen::Matrix3d* H, Eigen::Vector3d* g) {
-    double c = 0.0;
-    int n = 0;
-    if (H) H->setZero();
-    if (g) g->setZero();
-    for (int v = 2; v < small_curr.rows - 2; ++v) {
-      const float* row = small_curr.ptr<float>(v);
-      for (int u = 2; u < small_curr.cols - 2; ++u) {
-        const Eigen::Vector3d f = K.ray(u, v);
-        const Eigen::Vector3d p = Rc * f;
-        if (p.z() <= 0.1) continue;
-        const double pu = K.fx * p.x() / p.z() + K.cx;
-        const double pv = K.fy * p.y() / p.z() + K.cy;
-        if (pu < 1 || pv < 1 || pu > small_curr.cols - 2 || pv > small_curr.rows - 2) continue;
-        const double r = bilinear(prev_small_, pu, pv) - static_cast<double>(row[u]);
-        c += r * r;
-        ++n;
-        if (H) {
-          Eigen::Matrix<double, 2, 3> dw;
-          const double iz = 1.0 / p.z();
-          dw << K.fx * iz, 0, -K.fx * p.x() * iz * iz, 0, K.fy * iz, -K.fy * p.y() * iz * iz;
-          const Eigen::RowVector2d grad(bilinear(gx, pu, pv), bilinear(gy, pu, pv));
-          const Eigen::RowVector3d J = grad * dw * (-Rc * skew(f));
-          *H += J.transpose() * J;
-          *g += J.transpose() * r;
-        }
-      }
-    }
-    return n > 100 ? c / n : std::numeric_limits<double>::infinity();
+  struct Sample {
+    Eigen::Vector3d ray;
+    Eigen::Vector3d J;
+    double value;
   };
-  Eigen::Matrix3d H;
-  Eigen::Vector3d g;
-  double c = cost(R, &H, &g);
-  double lambda = 1e-3;
-  for (int it = 0; it < 8 && std::isfinite(c); ++it) {
-    Eigen::Matrix3d A = H;
-    A.diagonal() *= 1.0 + lambda;
-    const Eigen::Vector3d step = A.ldlt().solve(-g);
-    if (!step.allFinite()) break;
-    const Eigen::Matrix3d R_new = R * expSO3(step);
-    Eigen::Matrix3d H_new;
-    Eigen::Vector3d g_new;
-    const double c_new = cost(R_new, &H_new, &g_new);
-    if (c_new < c) {
-      R = R_new;
-      H = H_new;
-      g = g_new;
-      c = c_new;
-      lambda *= 0.1;
-      if (step.norm() < 1e-5) break;
-    } else {
-      lambda *= 10.0;
+  std::vector<Sample> samples;
+  samples.reserve(static_cast<std::size_t>(small_curr.rows * small_curr.cols));
+  Eigen::Matrix3d H = Eigen::Matrix3d::Zero();
+  for (int v = 2; v < small_curr.rows - 2; ++v) {
+    const float* row = small_curr.ptr<float>(v);
+    const float* up = small_curr.ptr<float>(v - 1);
+    const float* down = small_curr.ptr<float>(v + 1);
+    for (int u = 2; u < small_curr.cols - 2; ++u) {
+      const double gu = 0.5 * (static_cast<double>(row[u + 1]) - static_cast<double>(row[u - 1]));
+      const double gv = 0.5 * (static_cast<double>(down[u]) - static_cast<double>(up[u]));
+      if (gu * gu + gv * gv < 1.0) continue;  // flat pixels carry no information
+      const Eigen::Vector3d f = K.ray(u, v);
+      // d pi(K exp(delta) f) / d delta at delta = 0, with f.z = 1: dpi * (-[f]x).
+      Eigen::Matrix<double, 2, 3> dpi;
+      dpi << K.fx, 0, -K.fx * f.x(), 0, K.fy, -K.fy * f.y();
+      const Eigen::Vector3d J = (Eigen::RowVector2d(gu, gv) * dpi * (-skew(f))).transpose();
+      samples.push_back({f, J, static_cast<double>(row[u])});
+      H += J * J.transpose();
     }
+  }
+  if (samples.size() < 100) return T;
+  const Eigen::LDLT<Eigen::Matrix3d> solver(H);
+  Eigen::Matrix3d R = T.linear();
+  for (int it = 0; it < 6; ++it) {
+    Eigen::Vector3d g = Eigen::Vector3d::Zero();
+    int used = 0;
+    for (const Sample& s : samples) {
+      const Eigen::Vector3d p = R * s.ray;
+      if (p.z() <= 0.1) continue;
+      const double pu = K.fx * p.x() / p.z() + K.cx;
+      const double pv = K.fy * p.y() / p.z() + K.cy;
+      if (pu < 1 || pv < 1 || pu > small_curr.cols - 2 || pv > small_curr.rows - 2) continue;
+      g += s.J * (s.value - bilinear(prev_small_, pu, pv));
+      ++used;
+    }
+    if (used < 100) break;
+    const Eigen::Vector3d delta = -solver.solve(g);
+    if (!delta.allFinite() || delta.norm() > 0.2) break;
+    R = R * expSO3(-delta);
+    if (delta.norm() < 1e-5) break;
   }
   T.linear() = R;
   return T;
