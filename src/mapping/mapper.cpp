@@ -485,13 +485,16 @@ MapUpdate Mapper::takeUpdate() {
   update.resolution_m = resolution();
   update.frame_id = config_.frame_id;
   update.sequence = next_update_sequence_++;
-  withTree([&update](auto& tree) {
+  const bool new_free = config_.update_new_free_voxels;
+  withTree([&update, new_free](auto& tree) {
     update.voxels.reserve(tree.numChangesDetected());
     for (auto it = tree.changedKeysBegin(); it != tree.changedKeysEnd(); ++it) {
       // search() finds the leaf (or the pruned ancestor holding its value); inner nodes are not
       // needed, so lazy evaluation is no obstacle.
       const auto* node = tree.search(it->first);
       if (node == nullptr) continue;
+      // it->second: true for a newly created voxel, false for an occupancy flip.
+      if (!new_free && it->second && !tree.isNodeOccupied(node)) continue;
       const octomap::point3d c = tree.keyToCoord(it->first);
       update.voxels.push_back({Eigen::Vector3f(c.x(), c.y(), c.z()), node->getLogOdds()});
     }

@@ -84,6 +84,8 @@ MappingConfig MappingConfig::load(Config& config) {
   c.voxel_filter_mode = parseFilterMode(config.getChoice(
       "mapping.voxel_filter_mode", toString(c.voxel_filter_mode), {"nearest", "centroid"}));
   c.update_rate_hz = config.getDouble("mapping.update_rate_hz", c.update_rate_hz, 0.0, 1000.0);
+  c.update_new_free_voxels =
+      config.getBool("mapping.update_new_free_voxels", c.update_new_free_voxels);
   c.full_map_period_s =
       config.getDouble("mapping.full_map_period_s", c.full_map_period_s, 0.0, 86400.0);
   c.up_axis = parseUpAxis(config.getChoice("mapping.projection.up_axis", toString(c.up_axis),

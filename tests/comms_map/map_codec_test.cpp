@@ -59,8 +59,12 @@ FullMap overTheWire(const FullMap& map) {
   return *decoded;
 }
 
-TEST(MapCodec, UpdateStreamAppliedToAnEmptyTreeReproducesTheFullMap) {
-  Mapper mapper(streamingConfig());
+class UpdateStream : public ::testing::TestWithParam<bool> {};
+
+TEST_P(UpdateStream, AppliedToAnEmptyTreeReproducesTheFullMapsOccupiedSet) {
+  MappingConfig config = streamingConfig();
+  config.update_new_free_voxels = GetParam();
+  Mapper mapper(config);
   MapReplica replica;
   const test::BoxRoom room;
   Utime utime = 1'000'000;
@@ -91,8 +95,18 @@ TEST(MapCodec, UpdateStreamAppliedToAnEmptyTreeReproducesTheFullMap) {
   EXPECT_EQ(occupiedSet(replica.tree()), expected);
   EXPECT_EQ(replica.gaps(), 0);
   EXPECT_GT(messages, 5);
-  EXPECT_GT(voxels_sent, expected.size());
+  if (GetParam()) {
+    EXPECT_GT(voxels_sent, 3 * expected.size());
+  } else {
+    EXPECT_LT(voxels_sent, 2 * expected.size());
+  }
 }
+
+INSTANTIATE_TEST_SUITE_P(MapCodec, UpdateStream, ::testing::Bool(),
+                         [](const ::testing::TestParamInfo<bool>& param_info) {
+                           return param_info.param ? std::string("WithNewFreeVoxels")
+                                             : std::string("OccupiedAndFlipsOnly");
+                         });
 
 TEST(MapCodec, ALostUpdateOrARebuildWaitsForTheNextFullMap) {
   Mapper mapper(streamingConfig());

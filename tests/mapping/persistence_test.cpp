@@ -117,6 +117,25 @@ TEST(MapPersistence, SavedOtKeepsEveryLogOddsAndLoadsToContinueMapping) {
   fs::remove_all(dir);
 }
 
+TEST(MapPersistence, AColourMapSavedAsOtLoadsBackWithItsColours) {
+  MappingConfig config = quietConfig();
+  config.color = true;
+  Mapper colored(config);
+  mapSomeRoom(colored, 3);
+  const auto dir = test::makeTempDir("color");
+  const std::string path = (dir / "color.ot").string();
+  ASSERT_TRUE(colored.saveMap(path).ok);
+  Mapper plain(quietConfig());  // configured without colour: the file's tree type wins
+  const MapFileResult loaded = plain.loadMap(path);
+  ASSERT_TRUE(loaded.ok) << loaded.error;
+  ASSERT_TRUE(plain.hasColor());
+  const PointCloud a = colored.occupiedCloud();
+  const PointCloud b = plain.occupiedCloud();
+  ASSERT_EQ(a.size(), b.size());
+  EXPECT_TRUE(a.colors_bgr == b.colors_bgr);
+  fs::remove_all(dir);
+}
+
 TEST(MapPersistence, AWriteThatFailsLeavesThePreviousFileIntact) {
   const auto dir = test::makeTempDir("atomic");
   const std::string path = (dir / "file.txt").string();

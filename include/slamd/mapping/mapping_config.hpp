@@ -74,6 +74,11 @@ struct MappingConfig {
   // --- outputs (times are message utime, so a replayed log gives the same outputs) -----------
   /// `update_rate_hz` (double, default 5, 0..1000, hertz): voxel_map_update_t rate; 0 = none.
   double update_rate_hz = 5.0;
+  /// `update_new_free_voxels` (bool, default true): include newly observed free voxels in
+  /// updates. false sends only occupied voxels and occupancy flips: a subscriber's occupied set
+  /// stays exact while exploration updates shrink several-fold, but its free space stays unknown
+  /// until the next full map.
+  bool update_new_free_voxels = true;
   /// `full_map_period_s` (double, default 10, 0..86400, seconds): full voxel_map_t period;
   /// 0 = only on request.
   double full_map_period_s = 10.0;
