@@ -8,6 +8,7 @@ VanishingPointConfig VanishingPointConfig::load(Config& config, const std::strin
   VanishingPointConfig c;
   const auto key = [&prefix](const char* name) { return prefix + "." + name; };
   c.segment_detector = config.getChoice(key("segment_detector"), c.segment_detector, {"hough", "lsd"});
+  c.image_scale = config.getDouble(key("image_scale"), c.image_scale, 0.1, 1.0);
   c.blur_kernel_px = config.getInt(key("blur_kernel_px"), c.blur_kernel_px, 0, 15);
   c.canny_low = config.getDouble(key("canny_low"), c.canny_low, 1.0, 1000.0);
   c.canny_high = config.getDouble(key("canny_high"), c.canny_high, 1.0, 1000.0);

@@ -21,10 +21,12 @@ struct CorridorPose {
   double yaw_deg, pitch_deg, roll_deg, x_m, y_m;
 };
 
-void expectCorridorWithin2Px(const std::string& detector_name) {
+void expectCorridorWithin2Px(const std::string& detector_name, double image_scale = 0.5) {
   const CameraIntrinsics K;
   VanishingPointConfig config;
   config.segment_detector = detector_name;
+  config.image_scale = image_scale;
+  if (image_scale == 1.0) config.blur_kernel_px = 5;
   VanishingPointDetector detector(K, config);
   const CorridorPose poses[] = {{0, 0, 0, 0, 0},      {6, -3, 2, 0.3, 0},  {-9, 4, -3, -0.4, 0.2},
                                 {15, 0, 0, 0.5, -0.1}, {-4, -7, 5, 0, 0.3}, {2, 8, -6, -0.6, -0.2}};
@@ -56,6 +58,10 @@ void expectCorridorWithin2Px(const std::string& detector_name) {
 
 TEST(VanishingPointDetector, FindsSyntheticCorridorPointWithin2PxWithHough) {
   expectCorridorWithin2Px("hough");
+}
+
+TEST(VanishingPointDetector, FindsSyntheticCorridorPointWithin2PxWithHoughAtFullResolution) {
+  expectCorridorWithin2Px("hough", 1.0);
 }
 
 TEST(VanishingPointDetector, FindsSyntheticCorridorPointWithin2PxWithLsd) {

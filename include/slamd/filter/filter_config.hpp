@@ -14,9 +14,14 @@ struct VanishingPointConfig {
   /// `segment_detector` (choice hough|lsd, default hough): probabilistic Hough on Canny edges
   /// (paper 002) or OpenCV's line segment detector.
   std::string segment_detector = "hough";
-  /// `blur_kernel_px` (int, default 5, 0..15, pixels): Gaussian blur before Canny; 0 or 1 = none,
-  /// even values are rounded up to the next odd size.
-  int blur_kernel_px = 5;
+  /// `image_scale` (double, default 0.5, 0.1..1, dimensionless): segments are extracted from the
+  /// image resized by this factor (area averaging) and scaled back to full-resolution pixels; the
+  /// pixel-valued options below stay in full-resolution pixels. 0.5 quarters the Hough cost.
+  double image_scale = 0.5;
+  /// `blur_kernel_px` (int, default 0, 0..15, pixels of the resized image): Gaussian blur before
+  /// Canny; 0 or 1 = none (the area-averaging resize already smooths), even values are rounded up
+  /// to the next odd size. Use 5 with image_scale 1.
+  int blur_kernel_px = 0;
   /// `canny_low`, `canny_high` (double, defaults 40 / 120, 1..1000, grey levels): Canny hysteresis
   /// thresholds; canny_low must not exceed canny_high.
   double canny_low = 40.0;
@@ -27,7 +32,8 @@ struct VanishingPointConfig {
   double hough_rho_px = 1.0;
   /// `hough_theta_deg` (double, default 1, 0.1..10, degrees): angle resolution of the Hough space.
   double hough_theta_deg = 1.0;
-  /// `hough_threshold` (int, default 40, 1..1000, votes): accumulator threshold.
+  /// `hough_threshold` (int, default 40, 1..1000, votes at full resolution; multiplied by
+  /// image_scale): accumulator threshold.
   int hough_threshold = 40;
   /// `min_line_length_px` (double, default 30, 2..2000, pixels): shorter segments are dropped.
   double min_line_length_px = 30.0;

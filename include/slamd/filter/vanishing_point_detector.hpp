@@ -8,7 +8,7 @@
 //   if (vp.status == VanishingPointStatus::kOk) ekf.updateVanishingPoint(vp.pixel,
 //                                                                        vp.pixel_covariance);
 //
-// Steps: optional Gaussian blur, Canny edges, probabilistic Hough segments (or OpenCV's LSD on the
+// Steps: resize by image_scale (default 0.5), optional Gaussian blur, Canny edges, probabilistic Hough segments (or OpenCV's LSD on the
 // grey image), optional removal of segments nearly parallel to the image axes (paper 002), then
 // RANSAC over segment pairs: each pair's intersection is scored by the summed length of the
 // segments pointing at it (angle between the segment and the ray from its midpoint to the point
@@ -109,7 +109,7 @@ class VanishingPointDetector {
   std::vector<LineSegment> segments_;
   std::vector<int> inliers_;
   VanishingPointCounters counters_;
-  cv::Mat blurred_, edges_;  ///< scratch images reused between frames
+  cv::Mat scaled_, blurred_, edges_;  ///< scratch images reused between frames
   cv::Ptr<cv::LineSegmentDetector> lsd_;  ///< only when segment_detector = lsd
 };
 
