@@ -40,9 +40,9 @@ std::uint64_t deriveSeed(std::uint64_t seed, std::uint64_t purpose, std::uint64_
   return second.nextU64();
 }
 
-float standardNormalFromBits(std::uint16_t bits) {
+const float* standardNormalTable() {
   static const std::array<float, kTableSize> table = makeQuantileTable();
-  return table[bits];
+  return table.data();
 }
 
 }  // namespace slamd::synth

@@ -71,10 +71,10 @@ double SensorModel::axialNoiseStdM(double z_m, double incidence_rad) {
 
 double SensorModel::quantizeDepth(double z_m) const {
   // Disparity in pixels, rounded to the sensor's sub-pixel step (Khoshelham & Oude Elberink 2012).
-  const double fb = params_.ir_focal_px * params_.baseline_m;
-  const double steps = std::round(fb / z_m * params_.disparity_subpixel);
+  const double fb8 = params_.ir_focal_px * params_.baseline_m * params_.disparity_subpixel;
+  const double steps = std::floor(fb8 / z_m + 0.5);
   if (steps < 1.0) return std::numeric_limits<double>::infinity();
-  return fb * params_.disparity_subpixel / steps;
+  return fb8 / steps;
 }
 
 double SensorModel::quantizationStepM(double z_m) const {
@@ -101,6 +101,9 @@ cv::Mat SensorModel::measureDepth(const RenderOutput& render, std::uint64_t seed
               cv::Point(-1, -1), 1, cv::BORDER_REPLICATE);
   }
   Rng rng(deriveSeed(seed, kDepthNoise, static_cast<std::uint64_t>(frame)));
+  const float* normal_table = standardNormalTable();
+  // Disparity quantisation inline (see quantizeDepth): z = fb8 / round(fb8 / z).
+  const double fb8 = params_.ir_focal_px * params_.baseline_m * params_.disparity_subpixel;
   std::uint64_t bits = 0;
   int bits_left = 0;
   for (int r = 0; r < rows; ++r) {
@@ -127,14 +130,18 @@ cv::Mat SensorModel::measureDepth(const RenderOutput& render, std::uint64_t seed
           bits = rng.nextU64();
           bits_left = 4;
         }
-        const double n = standardNormalFromBits(static_cast<std::uint16_t>(bits & 0xFFFF));
+        const double n = static_cast<double>(normal_table[bits & 0xFFFF]);
         bits >>= 16;
         --bits_left;
         const double incidence = static_cast<double>(
             std::acos(std::clamp(cos_row[c], 0.0f, 1.0f)));
         measured += axialNoiseStdM(z, incidence) * n;
       }
-      if (params_.depth_quantization) measured = quantizeDepth(std::max(measured, 1e-3));
+      if (params_.depth_quantization) {
+        // Positive disparities only: +0.5 then truncation is round-half-up.
+        const double steps = static_cast<double>(static_cast<std::int64_t>(fb8 / std::max(measured, 1e-3) + 0.5));
+        measured = steps >= 1.0 ? fb8 / steps : std::numeric_limits<double>::infinity();
+      }
       if ((params_.min_range_m > 0.0 && measured < params_.min_range_m) ||
           (params_.max_range_m > 0.0 && measured > params_.max_range_m) || !(measured > 0.0)) {
         out[c] = nan;
@@ -172,6 +179,7 @@ void SensorModel::measureColor(const cv::Mat& color_bgr, std::uint64_t seed, std
   color_out.create(color_bgr.size(), CV_8UC3);
   Rng rng(deriveSeed(seed, kColorNoise, static_cast<std::uint64_t>(frame)));
   const float sigma = static_cast<float>(params_.color_noise_std);
+  const float* normal_table = standardNormalTable();
   const float g = static_cast<float>(gain);
   for (int r = 0; r < color_bgr.rows; ++r) {
     const auto* in = color_bgr.ptr<std::uint8_t>(r);
@@ -182,7 +190,7 @@ void SensorModel::measureColor(const cv::Mat& color_bgr, std::uint64_t seed, std
       for (; k + 4 <= n; k += 4) {
         std::uint64_t bits = rng.nextU64();
         for (int j = 0; j < 4; ++j) {
-          const float noise = sigma * standardNormalFromBits(static_cast<std::uint16_t>(bits & 0xFFFF));
+          const float noise = sigma * normal_table[bits & 0xFFFF];
           bits >>= 16;
           out[k + j] = cv::saturate_cast<std::uint8_t>(static_cast<float>(in[k + j]) * g + noise);
         }

@@ -5,6 +5,7 @@
 //   slamd-synth --scene room --out /tmp/room --set synthetic.sensor.exact=true
 //
 // --scene/--trajectory/--frames/--seed set synthetic.* and win over --config and --set.
+// Exit codes: 2 usage, 3 configuration, 4 unknown scene, 5 output folder not writable.
 
 #include <iostream>
 #include <string>
@@ -32,13 +33,13 @@ int main(int argc, char** argv) {
   const std::string scene = options.value("scene");
   const std::string out = options.value("out");
 
-  std::unique_ptr<FrameSource> source;
+  std::unique_ptr<SyntheticSource> source;
   try {
     Config config = options.loadConfig();
     if (options.has("trajectory")) config.set("synthetic.trajectory", options.value("trajectory"));
     if (options.has("frames")) config.set("synthetic.frames", options.value("frames"));
     if (options.has("seed")) config.set("synthetic.seed", options.value("seed"));
-    source = createSyntheticSource(scene, config);
+    source = std::make_unique<SyntheticSource>(scene, SyntheticConfig::load(config));
     reportConfig(config, "slamd-synth");
   } catch (const ConfigError& error) {
     std::cerr << "slamd-synth: " << error.what() << "\n";
@@ -50,7 +51,10 @@ int main(int argc, char** argv) {
 
   try {
     source->open();
-    TumSequenceWriter writer(out, "slamd-synth " + source->description());
+    // camera.depth_scale (default 5000, the TUM factor) so that the same configuration reads the
+    // folder back with `tum:DIR`.
+    TumSequenceWriter writer(out, "slamd-synth " + source->description(),
+                             source->config().camera.depth_scale);
     writer.open();
     while (true) {
       const FrameRead read = source->next(std::chrono::milliseconds(1000));

@@ -12,6 +12,8 @@
 // detect. Posters are always rich: blocks of colour, rings, stripes, checker patches and rows of
 // "text".
 
+#include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <vector>
 
@@ -51,5 +53,44 @@ class Texture {
  private:
   std::vector<cv::Mat> levels_;  ///< CV_8UC3 pyramid, each half the size of the previous
 };
+
+// Inline: called once per rendered pixel.
+inline cv::Vec3f Texture::sample(double x_texel, double y_texel, int level, bool wrap) const {
+  level = std::clamp(level, 0, levelCount() - 1);
+  const cv::Mat& image = levels_[static_cast<std::size_t>(level)];
+  const int n = image.cols;
+  const double scale = 1.0 / static_cast<double>(1 << level);
+  const double x = (x_texel + 0.5) * scale - 0.5;
+  const double y = (y_texel + 0.5) * scale - 0.5;
+  const double fx0 = std::floor(x);
+  const double fy0 = std::floor(y);
+  const float tx = static_cast<float>(x - fx0);
+  const float ty = static_cast<float>(y - fy0);
+  // Texture coordinates can be large (tens of metres of wall): reduce in 64-bit before masking.
+  auto x0 = static_cast<long long>(fx0);
+  auto y0 = static_cast<long long>(fy0);
+  long long x1 = x0 + 1;
+  long long y1 = y0 + 1;
+  if (wrap) {
+    const long long mask = n - 1;
+    x0 &= mask; x1 &= mask; y0 &= mask; y1 &= mask;
+  } else {
+    x0 = std::clamp<long long>(x0, 0, n - 1); x1 = std::clamp<long long>(x1, 0, n - 1);
+    y0 = std::clamp<long long>(y0, 0, n - 1); y1 = std::clamp<long long>(y1, 0, n - 1);
+  }
+  const auto* row0 = image.ptr<cv::Vec3b>(static_cast<int>(y0));
+  const auto* row1 = image.ptr<cv::Vec3b>(static_cast<int>(y1));
+  const cv::Vec3b& a = row0[x0];
+  const cv::Vec3b& b = row0[x1];
+  const cv::Vec3b& c = row1[x0];
+  const cv::Vec3b& d = row1[x1];
+  cv::Vec3f out;
+  for (int k = 0; k < 3; ++k) {
+    const float top = static_cast<float>(a[k]) + tx * (static_cast<float>(b[k]) - static_cast<float>(a[k]));
+    const float bottom = static_cast<float>(c[k]) + tx * (static_cast<float>(d[k]) - static_cast<float>(c[k]));
+    out[k] = top + ty * (bottom - top);
+  }
+  return out;
+}
 
 }  // namespace slamd::synth
