@@ -4,6 +4,9 @@
 
 #include <cstdio>
 
+#include <opencv2/imgproc.hpp>
+
+#include "slamd/capture/image_io.hpp"
 #include "slamd/common/log.hpp"
 #include "slamd/comms/frame_codec.hpp"
 #include "slamd/comms/message_codec.hpp"
@@ -30,6 +33,19 @@ std::string fingerprintText(const std::vector<std::uint8_t>& bytes) {
     text += hex;
   }
   return text;
+}
+
+// frame_codec decodes JPEG with OpenCV, which turns corrupt or truncated data into a half-grey
+// image with only a warning on stderr. Capture decodes JPEG colour strictly first (any libjpeg
+// warning is an error) and hands the codec the raw pixels instead.
+// Returns an empty string, or why the JPEG is bad.
+std::string strictJpegToRaw(std::vector<std::uint8_t>& data, bool rgb_order) {
+  std::string error;
+  cv::Mat bgr = decodeColorImage(data.data(), data.size(), error);
+  if (bgr.empty()) return "JPEG colour: " + error;
+  if (rgb_order) cv::cvtColor(bgr, bgr, cv::COLOR_BGR2RGB);
+  data.assign(bgr.datastart, bgr.dataend);
+  return {};
 }
 
 }  // namespace
@@ -136,11 +152,23 @@ FrameRead LcmFrameSource::decode(const RawMessage& message) {
       auto decoded = decodeMessage<slamd::rgbd_frame_t>(message.bytes.data(), message.bytes.size(),
                                                         &error);
       if (!decoded) return skipFrame(counters_, kComponent, what + ": " + error);
+      if (decoded->color_encoding == slamd::rgbd_frame_t::COLOR_JPEG) {
+        error = strictJpegToRaw(decoded->color_data, false);
+        if (!error.empty()) return skipFrame(counters_, kComponent, what + ": " + error);
+        decoded->color_encoding = slamd::rgbd_frame_t::COLOR_BGR8;
+        decoded->color_nbytes = static_cast<std::int32_t>(decoded->color_data.size());
+      }
       frame = std::make_shared<RgbdFrame>(decodeRgbdFrame(*decoded));
     } else if (is_kinect && want_kinect) {
       auto decoded = decodeMessage<kinect::frame_msg_t>(message.bytes.data(), message.bytes.size(),
                                                         &error);
       if (!decoded) return skipFrame(counters_, kComponent, what + ": " + error);
+      if (decoded->image.image_data_format == kinect::image_msg_t::VIDEO_RGB_JPEG) {
+        error = strictJpegToRaw(decoded->image.image_data, true);
+        if (!error.empty()) return skipFrame(counters_, kComponent, what + ": " + error);
+        decoded->image.image_data_format = kinect::image_msg_t::VIDEO_RGB;
+        decoded->image.image_data_nbytes = static_cast<std::int32_t>(decoded->image.image_data.size());
+      }
       frame = std::make_shared<RgbdFrame>(decodeKinectFrame(*decoded, config_.camera.intrinsics));
     } else {
       std::string expected = config_.format == LcmFrameFormat::kRgbdFrame ? "slamd.rgbd_frame_t"
