@@ -12,6 +12,7 @@
 #include <gtest/gtest.h>
 
 #include "corridor_scene.hpp"
+#include "noisy_odometry.hpp"
 #include "slamd/filter/pose_ekf.hpp"
 #include "slamd/filter/vanishing_point_filter.hpp"
 
@@ -72,12 +73,11 @@ SimResult simulate(const SimParams& p) {
   config.rotation_noise_rad_per_sqrt_s = 0.0;
   config.gate_chi2 = p.gate_chi2;
   PoseEkf ekf(config, K);
-  std::mt19937 rng(p.seed);
+  filter_test::NoisyOdometry odometry_model(p.odometry_sigma_m, p.odometry_sigma_rad, p.seed);
+  std::mt19937& rng = odometry_model.rng();
   std::normal_distribution<double> normal(0.0, 1.0);
   std::uniform_real_distribution<double> unit(0.0, 1.0);
-  Matrix6d odometry_cov = Matrix6d::Zero();
-  odometry_cov.diagonal() << Eigen::Vector3d::Constant(p.odometry_sigma_m * p.odometry_sigma_m),
-      Eigen::Vector3d::Constant(p.odometry_sigma_rad * p.odometry_sigma_rad);
+  const Matrix6d& odometry_cov = odometry_model.covariance();
   const Eigen::Matrix2d vp_cov = p.vp_sigma_px * p.vp_sigma_px * Eigen::Matrix2d::Identity();
 
   SimResult result;
@@ -86,9 +86,7 @@ SimResult simulate(const SimParams& p) {
   for (int k = 1; k <= p.steps; ++k) {
     const SE3 truth = truePose(k);
     const SE3 true_step = truePose(k - 1).inverse() * truth;
-    Vector6d noise;
-    for (int i = 0; i < 6; ++i) noise(i) = normal(rng) * (i < 3 ? p.odometry_sigma_m : p.odometry_sigma_rad);
-    const SE3 measured_step = PoseEkf::boxplus(true_step, noise);
+    const SE3 measured_step = odometry_model.measure(true_step);
     odometry = odometry * measured_step;
     EXPECT_EQ(ekf.predict(measured_step, odometry_cov, 1.0 / 30.0), EkfPredictStatus::kOk);
 
@@ -233,12 +231,7 @@ TEST(CorridorSimulation, FilterStageOnRenderedCorridorImagesBeatsOdometry) {
   const CameraIntrinsics K;
   FilterConfig config;
   VanishingPointFilter filter(config, K);
-  std::mt19937 rng(5);
-  std::normal_distribution<double> normal(0.0, 1.0);
-  constexpr double kSigmaM = 0.005, kSigmaRad = 0.004;
-  Matrix6d cov = Matrix6d::Zero();
-  cov.diagonal() << Eigen::Vector3d::Constant(kSigmaM * kSigmaM),
-      Eigen::Vector3d::Constant(kSigmaRad * kSigmaRad);
+  filter_test::NoisyOdometry odometry_model(0.005, 0.004, 5);
   SE3 odometry = SE3::Identity();
   int accepted = 0;
   double max_ekf_error = 0.0;
@@ -246,10 +239,8 @@ TEST(CorridorSimulation, FilterStageOnRenderedCorridorImagesBeatsOdometry) {
   for (int k = 1; k <= kSteps; ++k) {
     FilterInput in;
     in.utime = k * 33333;
-    Vector6d noise;
-    for (int i = 0; i < 6; ++i) noise(i) = normal(rng) * (i < 3 ? kSigmaM : kSigmaRad);
-    in.T_prev_curr = PoseEkf::boxplus(truePose(k - 1).inverse() * truePose(k), noise);
-    in.covariance = cov;
+    in.T_prev_curr = odometry_model.measure(truePose(k - 1).inverse() * truePose(k));
+    in.covariance = odometry_model.covariance();
     in.dt_s = 1.0 / 30.0;
     in.gray = filter_test::renderCorridor(K, truePose(k), static_cast<unsigned>(k));
     odometry = odometry * in.T_prev_curr;

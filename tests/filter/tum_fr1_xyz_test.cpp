@@ -4,7 +4,6 @@
 
 #include <cmath>
 #include <fstream>
-#include <random>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -14,6 +13,7 @@
 
 #include "slamd/common/trajectory.hpp"
 #include "slamd/filter/vanishing_point_filter.hpp"
+#include "noisy_odometry.hpp"
 #include "test_data.hpp"
 
 namespace slamd {
@@ -60,12 +60,7 @@ TEST(TumFr1Xyz, VanishingPointsDoNotHurtWithoutACorridor) {
   K.cx = 318.6;
   K.cy = 255.3;
   VanishingPointFilter filter(FilterConfig{}, K);
-  std::mt19937 rng(42);
-  std::normal_distribution<double> normal(0.0, 1.0);
-  constexpr double kSigmaM = 0.003, kSigmaRad = 0.003;
-  Matrix6d cov = Matrix6d::Zero();
-  cov.diagonal() << Eigen::Vector3d::Constant(kSigmaM * kSigmaM),
-      Eigen::Vector3d::Constant(kSigmaRad * kSigmaRad);
+  filter_test::NoisyOdometry odometry_model(0.003, 0.003, 42);
 
   const StampedPose* first = nullptr;
   const StampedPose* previous = nullptr;
@@ -80,10 +75,9 @@ TEST(TumFr1Xyz, VanishingPointsDoNotHurtWithoutACorridor) {
       continue;
     }
     FilterInput in;
-    Vector6d noise;
-    for (int k = 0; k < 6; ++k) noise(k) = normal(rng) * (k < 3 ? kSigmaM : kSigmaRad);
-    in.T_prev_curr = PoseEkf::boxplus(previous->T_world_camera.inverse() * gt->T_world_camera, noise);
-    in.covariance = cov;
+    in.T_prev_curr =
+        odometry_model.measure(previous->T_world_camera.inverse() * gt->T_world_camera);
+    in.covariance = odometry_model.covariance();
     in.dt_s = gt->timestamp_s - previous->timestamp_s;
     in.gray = cv::imread(images[i].path, cv::IMREAD_GRAYSCALE);
     ASSERT_FALSE(in.gray.empty()) << images[i].path;
