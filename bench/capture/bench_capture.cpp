@@ -5,7 +5,8 @@
 // Every benchmark times each frame and reports p50_ms / p95_ms over all frames it handled (the
 // issue's figures), besides Google Benchmark's mean time per iteration. Inputs: the TUM fr1/xyz
 // sequence from ../shared/data (or $SLAMD_DATA_DIR); the LCM benchmarks decode messages encoded
-// from its first frames (no network), so they measure slamd's own work per received message.
+// from its first frames (no network), so they measure slamd's own work per received message; the
+// OpenNI2 benchmark reads the DummyDevice (320x240) and the synthetic one renders a corridor.
 
 #include <benchmark/benchmark.h>
 
@@ -19,6 +20,7 @@
 #include "slamd/common/latency_histogram.hpp"
 #include "slamd/comms/frame_codec.hpp"
 #include "slamd/comms/message_codec.hpp"
+#include "slamd/sources/create_frame_source.hpp"
 
 namespace slamd {
 namespace {
@@ -189,6 +191,47 @@ void BM_LcmKinectJpegZlibDecodeAndPreprocess(benchmark::State& state) {
   reportPercentiles(state, ms);
 }
 
+// Any source built by createRawFrameSource: CPU time of next() per frame (for a live device the
+// wall time is the device's frame period, so only cpu_* matter), plus default pre-processing.
+void sourceFrames(benchmark::State& state, const std::string& spec, Config config) {
+  std::unique_ptr<FrameSource> source;
+  try {
+    source = createRawFrameSource(spec, config);
+    source->open();
+  } catch (const std::exception& e) {
+    state.SkipWithError(e.what());
+    return;
+  }
+  DepthPreprocessor pre(stepsConfig(Steps::kDefault));
+  FrameTimes ms;
+  for (auto _ : state) {
+    ms.start();
+    FrameRead read;
+    do {
+      read = source->next(std::chrono::milliseconds(1000));
+    } while (read.status == FrameRead::Status::kTimeout);
+    if (read.status != FrameRead::Status::kFrame) {
+      state.SkipWithError(("source ended or skipped: " + read.message).c_str());
+      break;
+    }
+    cv::Mat depth = read.frame->depth_m.clone();
+    pre.process(depth);
+    benchmark::DoNotOptimize(depth.data);
+    ms.stop();
+  }
+  source->close();
+  reportPercentiles(state, ms);
+}
+
+void BM_OpenNi2DummyFrameAndPreprocess(benchmark::State& state) {
+  sourceFrames(state, "openni2:Dummy", Config());  // 320x240: the DummyDevice's only mode
+}
+
+void BM_SyntheticCorridorFrameAndPreprocess(benchmark::State& state) {
+  Config config = Config::fromFile(std::string(SLAMD_SOURCE_DIR) + "/config/synthetic.yaml");
+  sourceFrames(state, "synthetic:corridor", config);
+}
+
 // Each pre-processing step alone on fr1/xyz depth (640x480).
 void preprocessStep(benchmark::State& state, int step) {
   const auto frames = loadFrames(10);
@@ -226,6 +269,8 @@ BENCHMARK(BM_TumJpegPngDecodeAndPreprocessWithBilateral)
 BENCHMARK(BM_LcmRgbdJpegPngDecodeAndPreprocess)->Unit(benchmark::kMillisecond)->Iterations(200);
 BENCHMARK(BM_LcmRgbdJpegZlibDecodeAndPreprocess)->Unit(benchmark::kMillisecond)->Iterations(200);
 BENCHMARK(BM_LcmKinectJpegZlibDecodeAndPreprocess)->Unit(benchmark::kMillisecond)->Iterations(200);
+BENCHMARK(BM_OpenNi2DummyFrameAndPreprocess)->Unit(benchmark::kMillisecond)->Iterations(60);
+BENCHMARK(BM_SyntheticCorridorFrameAndPreprocess)->Unit(benchmark::kMillisecond)->Iterations(60);
 BENCHMARK(BM_PreprocessRangeGate)->Unit(benchmark::kMillisecond)->Iterations(200);
 BENCHMARK(BM_PreprocessFlyingPixels)->Unit(benchmark::kMillisecond)->Iterations(200);
 BENCHMARK(BM_PreprocessBilateral)->Unit(benchmark::kMillisecond)->Iterations(100);
