@@ -52,7 +52,9 @@ std::string strictJpegToRaw(std::vector<std::uint8_t>& data, bool rgb_order) {
 
 LcmFrameSourceConfig LcmFrameSourceConfig::load(Config& config) {
   LcmFrameSourceConfig out;
-  out.url = config.getString("capture.lcm.url", out.url);
+  // The program's own LCM URL (lcm.url, set by --lcm-url) unless capture has its own.
+  const std::string program_url = config.has("lcm.url") ? config.getString("lcm.url", "") : "";
+  out.url = config.getString("capture.lcm.url", program_url);
   const std::string format =
       config.getChoice("capture.lcm.format", "auto", {"auto", "rgbd", "kinect"});
   out.format = format == "rgbd"     ? LcmFrameFormat::kRgbdFrame

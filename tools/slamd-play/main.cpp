@@ -96,7 +96,7 @@ int main(int argc, char** argv) {
   PlayConfig play;
   try {
     Config config = options.loadConfig();
-    if (options.has("lcm-url")) config.set("capture.lcm.url", options.value("lcm-url"));
+    if (options.has("lcm-url")) config.set("lcm.url", options.value("lcm-url"));
     source = createFrameSource(options.value("source"), config);
     play = PlayConfig::load(config);
     if (options.flag("publish")) {

@@ -44,7 +44,7 @@ namespace slamd {
 enum class LcmFrameFormat { kAuto, kRgbdFrame, kKinectFrame };
 
 struct LcmFrameSourceConfig {
-  std::string url;                           ///< capture.lcm.url ("" = LCM's default)
+  std::string url;  ///< capture.lcm.url, else lcm.url, else "" (LCM's default, $LCM_DEFAULT_URL)
   LcmFrameFormat format = LcmFrameFormat::kAuto;  ///< capture.lcm.format: auto|rgbd|kinect
   int queue_capacity = 4;                    ///< capture.lcm.queue_capacity, messages, 1..1000
   double idle_end_s = 0.0;                   ///< capture.lcm.idle_end_s, 0 = never, [0, 3600]
