@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <random>
 #include <vector>
 
@@ -262,6 +263,30 @@ TEST(CorridorSimulation, FilterStageOnRenderedCorridorImagesBeatsOdometry) {
   EXPECT_LT(max_ekf_error * kRadToDeg, 1.5);
   EXPECT_LT(ekf_error * 3.0, odometry_error);
   EXPECT_EQ(filter.ekf().landmarks().size(), 1u);
+}
+
+TEST(CorridorSimulation, FilterStageCountsBadImagesAndKeepsPredicting) {
+  const CameraIntrinsics K;
+  VanishingPointFilter filter(FilterConfig{}, K);
+  FilterInput in;
+  in.T_prev_curr = truePose(0).inverse() * truePose(1);
+  in.gray = cv::Mat(480, 640, CV_32FC1, cv::Scalar(0.5));
+  FilterOutput out = filter.process(in);
+  ASSERT_TRUE(out.vanishing_point.has_value());
+  EXPECT_EQ(out.vanishing_point->status, VanishingPointStatus::kWrongImageType);
+  EXPECT_FALSE(out.update.has_value());
+  in.gray = cv::Mat(10, 10, CV_8UC1, cv::Scalar(3));
+  out = filter.process(in);
+  EXPECT_EQ(out.vanishing_point->status, VanishingPointStatus::kWrongImageSize);
+  in.covariance(0, 0) = std::numeric_limits<double>::quiet_NaN();
+  in.gray = cv::Mat();
+  out = filter.process(in);
+  EXPECT_EQ(out.predict_status, EkfPredictStatus::kFallbackCovariance);
+  EXPECT_FALSE(out.vanishing_point.has_value());
+  EXPECT_TRUE(out.pose.covariance.allFinite());
+  EXPECT_EQ(filter.detector().counters().bad_input, 2);
+  EXPECT_EQ(filter.ekf().counters().fallback_covariances, 1);
+  EXPECT_EQ(filter.steps(), 3);
 }
 
 TEST(CorridorSimulation, DisabledFilterOnlyChainsOdometry) {

@@ -132,6 +132,8 @@ class PoseEkf {
   /// Associates a vanishing point with the landmarks, gates and updates (or counts it towards a
   /// new landmark).
   /// @param pixel vanishing point, pixels; @param pixel_covariance 2x2, pixels^2
+  /// A non-finite pixel, one farther outside the image than filter.vp.max_outside_fraction, or a
+  /// covariance that is NaN or not positive definite gives kBadMeasurement (counted).
   VpUpdateResult updateVanishingPoint(const Eigen::Vector2d& pixel,
                                       const Eigen::Matrix2d& pixel_covariance);
 
