@@ -281,7 +281,8 @@ std::vector<Eigen::Vector2d> undistortPixels(const std::vector<cv::Point2f>& raw
 }
 
 bool alignPatch(const cv::Mat& templ, const cv::Point2f& templ_px, const cv::Mat& image,
-                const cv::Point2f& initial_px, double max_shift_px, cv::Point2f& aligned_px) {
+                const cv::Point2f& initial_px, double max_shift_px, cv::Point2f& aligned_px,
+                const cv::Matx22d& ref_from_curr) {
   constexpr int kHalf = 4;              // 9x9 patch
   constexpr int kSide = 2 * kHalf + 1;
   constexpr int kBorder = kHalf + 2;
@@ -297,15 +298,25 @@ bool alignPatch(const cv::Mat& templ, const cv::Point2f& templ_px, const cv::Mat
     const std::uint8_t* r1 = img.ptr<std::uint8_t>(y0 + 1) + x0;
     return (1 - ay) * ((1 - ax) * r0[0] + ax * r0[1]) + ay * ((1 - ax) * r1[0] + ax * r1[1]);
   };
-  if (templ.empty() || image.empty() || !inside(templ, templ_px.x, templ_px.y) ||
+  // The warped template reaches further than kHalf + 1 when ref_from_curr magnifies.
+  const double reach = (kHalf + 1) * std::max(std::abs(ref_from_curr(0, 0)) + std::abs(ref_from_curr(0, 1)),
+                                              std::abs(ref_from_curr(1, 0)) + std::abs(ref_from_curr(1, 1)));
+  if (templ.empty() || image.empty() || !(reach < 3 * kHalf) ||
       !inside(image, initial_px.x, initial_px.y)) {
+    return false;
+  }
+  const double tx0 = static_cast<double>(templ_px.x), ty0 = static_cast<double>(templ_px.y);
+  if (tx0 - reach < 0 || ty0 - reach < 0 || tx0 + reach > templ.cols - 2 ||
+      ty0 + reach > templ.rows - 2) {
     return false;
   }
   // Template with a one-pixel ring for central-difference gradients.
   double t[kSide + 2][kSide + 2];
   for (int dy = -kHalf - 1; dy <= kHalf + 1; ++dy) {
     for (int dx = -kHalf - 1; dx <= kHalf + 1; ++dx) {
-      t[dy + kHalf + 1][dx + kHalf + 1] = sample(templ, templ_px.x + dx, templ_px.y + dy);
+      t[dy + kHalf + 1][dx + kHalf + 1] =
+          sample(templ, tx0 + ref_from_curr(0, 0) * dx + ref_from_curr(0, 1) * dy,
+                 ty0 + ref_from_curr(1, 0) * dx + ref_from_curr(1, 1) * dy);
     }
   }
   double gx[kSide][kSide], gy[kSide][kSide], tv[kSide][kSide];
@@ -412,7 +423,7 @@ void attachGeometry(const cv::Mat& depth_m, const CameraIntrinsics& K,
     const int u = static_cast<int>(std::lround(features.keypoints[i].pt.x));
     const int v = static_cast<int>(std::lround(features.keypoints[i].pt.y));
     if (u < 1 || v < 1 || u >= depth_m.cols - 1 || v >= depth_m.rows - 1) continue;
-    const double z = depth_m.at<float>(v, u);
+    double z = depth_m.at<float>(v, u);
     if (!(z >= config.min_depth_m && z <= config.max_depth_m)) continue;
     // Reject corners on depth discontinuities: the 3x3 neighbourhood must agree with the centre.
     const double tolerance = 0.03 * z + 0.01;
@@ -428,6 +439,20 @@ void attachGeometry(const cv::Mat& depth_m, const CameraIntrinsics& K,
       }
     }
     if (!consistent) continue;
+    // Sub-pixel keypoint: interpolate the depth bilinearly when the four neighbours are valid
+    // (they agree with the centre, checked above), so slanted surfaces get the right depth.
+    const double x = static_cast<double>(features.keypoints[i].pt.x);
+    const double y = static_cast<double>(features.keypoints[i].pt.y);
+    const int x0 = static_cast<int>(std::floor(x));
+    const int y0 = static_cast<int>(std::floor(y));
+    if (x0 >= 0 && y0 >= 0 && x0 + 1 < depth_m.cols && y0 + 1 < depth_m.rows) {
+      const double z00 = depth_m.at<float>(y0, x0), z01 = depth_m.at<float>(y0, x0 + 1);
+      const double z10 = depth_m.at<float>(y0 + 1, x0), z11 = depth_m.at<float>(y0 + 1, x0 + 1);
+      if (std::isfinite(z00) && std::isfinite(z01) && std::isfinite(z10) && std::isfinite(z11)) {
+        const double ax = x - x0, ay = y - y0;
+        z = (1 - ay) * ((1 - ax) * z00 + ax * z01) + ay * ((1 - ax) * z10 + ax * z11);
+      }
+    }
     features.points[i] = K.backProject(features.pixels[i].x(), features.pixels[i].y(), z);
     ++features.num_with_depth;
   }

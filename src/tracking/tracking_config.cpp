@@ -21,6 +21,11 @@ TrackingConfig TrackingConfig::load(Config& config) {
   c.frontend = frontend == "sift"    ? FrontEndType::kSift
                : frontend == "fovis" ? FrontEndType::kFovis
                                      : FrontEndType::kOrb;
+  const std::string rejection =
+      config.getChoice("tracking.outlier_rejection", "auto", {"auto", "ransac", "clique"});
+  c.outlier_rejection = rejection == "ransac"   ? OutlierRejection::kRansac
+                        : rejection == "clique" ? OutlierRejection::kClique
+                                                : OutlierRejection::kAuto;
   c.max_features = config.getInt("tracking.max_features", c.max_features, 50, 10000);
   c.grid_cols = config.getInt("tracking.grid_cols", c.grid_cols, 1, 64);
   c.grid_rows = config.getInt("tracking.grid_rows", c.grid_rows, 1, 64);

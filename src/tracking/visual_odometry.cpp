@@ -282,7 +282,7 @@ VisualOdometry::TrackAttempt VisualOdometry::track(const FeatureSet& ref,
   std::vector<std::uint8_t> inliers(matches.size(), 0);
   SE3 T = SE3::Identity();
   int num_inliers = 0;
-  if (config_.frontend == FrontEndType::kFovis) {
+  if (config_.useClique()) {
     const std::vector<int> clique = maximumConsistentClique(
         matches, K, config_.fovis_clique_tolerance_m, config_.depth_sigma_coeff);
     std::vector<Eigen::Vector3d> pa, pb;
@@ -352,12 +352,28 @@ VisualOdometry::TrackAttempt VisualOdometry::track(const FeatureSet& ref,
     // sub-pixel consistent with the reference keypoints (not two independent detections).
     std::vector<cv::Point2f> aligned;
     std::vector<std::size_t> which;
+    const SE3 T_curr_ref = refined.T_ref_curr.inverse();
     for (std::size_t i = 0; i < matches.size(); ++i) {
       if (!inliers[i]) continue;
       const Correspondence& c = matches[i];
+      // Local affine map between the views at this point (fronto-parallel patch at its depth):
+      // how a pixel step in the current image moves in the reference image.
+      const Eigen::Vector2d& ref_px = ref.pixels[static_cast<std::size_t>(c.ref_index)];
+      const double z = c.point_ref.z();
+      const Eigen::Vector2d p0 = K.project(T_curr_ref * c.point_ref);
+      const Eigen::Vector2d pu =
+          K.project(T_curr_ref * K.backProject(ref_px.x() + 1.0, ref_px.y(), z)) - p0;
+      const Eigen::Vector2d pv =
+          K.project(T_curr_ref * K.backProject(ref_px.x(), ref_px.y() + 1.0, z)) - p0;
+      Eigen::Matrix2d curr_from_ref;
+      curr_from_ref << pu, pv;
+      const Eigen::Matrix2d inv = curr_from_ref.inverse();
+      const cv::Matx22d ref_from_curr(inv(0, 0), inv(0, 1), inv(1, 0), inv(1, 1));
       cv::Point2f out;
-      if (alignPatch(ref.gray, ref.keypoints[static_cast<std::size_t>(c.ref_index)].pt, cf.gray,
-                     cf.keypoints[static_cast<std::size_t>(c.curr_index)].pt, 3.0, out)) {
+      if (inv.allFinite() &&
+          alignPatch(ref.gray, ref.keypoints[static_cast<std::size_t>(c.ref_index)].pt, cf.gray,
+                     cf.keypoints[static_cast<std::size_t>(c.curr_index)].pt, 3.0, out,
+                     ref_from_curr)) {
         aligned.push_back(out);
         which.push_back(i);
       }

@@ -63,6 +63,15 @@ struct TrackingConfig {
   /// this fall back to matching by descriptor over the whole image.
   int min_guided_matches = 60;
 
+  /// tracking.outlier_rejection (choice auto|ransac|clique, default auto): how inliers are found
+  /// before refinement; auto = clique for fovis (as FOVIS), RANSAC for orb and sift.
+  enum class OutlierRejection { kAuto, kRansac, kClique };
+  OutlierRejection outlier_rejection = OutlierRejection::kAuto;
+  bool useClique() const {
+    return outlier_rejection == OutlierRejection::kClique ||
+           (outlier_rejection == OutlierRejection::kAuto && frontend == FrontEndType::kFovis);
+  }
+
   // --- Motion estimation ----------------------------------------------------------------------
   /// tracking.ransac_iterations (int, default 200, range [1, 100000]): upper bound on RANSAC
   /// hypotheses (fewer are drawn when the inlier ratio is high, at 99.9% confidence).
