@@ -2,9 +2,8 @@
 
 #include <cmath>
 #include <limits>
-#include <vector>
-
 #include <opencv2/core.hpp>
+#include <vector>
 
 #include "slamd/common/time.hpp"
 
@@ -16,9 +15,9 @@ DepthPreprocessorConfig DepthPreprocessorConfig::load(Config& config) {
   out.min_depth_m = config.getDouble("capture.preprocess.min_depth_m", out.min_depth_m, 0.0, 100.0);
   out.max_depth_m = config.getDouble("capture.preprocess.max_depth_m", out.max_depth_m, 0.0, 100.0);
   if (out.max_depth_m <= out.min_depth_m) {
-    throw ConfigError("capture.preprocess.max_depth_m=" + std::to_string(out.max_depth_m) +
-                      " must be greater than capture.preprocess.min_depth_m=" +
-                      std::to_string(out.min_depth_m));
+    throw ConfigError(
+        "capture.preprocess.max_depth_m=" + std::to_string(out.max_depth_m) +
+        " must be greater than capture.preprocess.min_depth_m=" + std::to_string(out.min_depth_m));
   }
   out.flying_pixels = config.getBool("capture.preprocess.flying_pixels", out.flying_pixels);
   out.jump_ratio =
@@ -96,8 +95,8 @@ int DepthPreprocessor::removeFlyingPixels(cv::Mat& depth_m) {
     for (int c = 0; c < cols; ++c) {
       const float z = here[c];
       const float jump = ratio * z;
-      const float neighbours[8] = {above[c - 1], above[c], above[c + 1], here[c - 1],
-                                   here[c + 1],  below[c - 1], below[c], below[c + 1]};
+      const float neighbours[8] = {above[c - 1], above[c],     above[c + 1], here[c - 1],
+                                   here[c + 1],  below[c - 1], below[c],     below[c + 1]};
       bool nearer = false;
       bool farther = false;
       int support = 0;

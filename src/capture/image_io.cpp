@@ -1,10 +1,10 @@
 #include "slamd/capture/image_io.hpp"
 
+#include <jpeglib.h>
+
 #include <csetjmp>
 #include <cstdio>
 #include <fstream>
-
-#include <jpeglib.h>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
@@ -83,8 +83,9 @@ cv::Mat decodeUnchanged(const std::uint8_t* data, std::size_t size, std::string&
   }
   cv::Mat image;
   try {
-    image = cv::imdecode(cv::Mat(1, static_cast<int>(size), CV_8UC1, const_cast<std::uint8_t*>(data)),
-                         cv::IMREAD_UNCHANGED);
+    image =
+        cv::imdecode(cv::Mat(1, static_cast<int>(size), CV_8UC1, const_cast<std::uint8_t*>(data)),
+                     cv::IMREAD_UNCHANGED);
   } catch (const cv::Exception& e) {
     error = std::string("corrupt image (") + e.err + ")";
     return {};

@@ -6,10 +6,9 @@
 #include <cstdlib>
 #include <filesystem>
 #include <mutex>
+#include <opencv2/imgproc.hpp>
 #include <sstream>
 #include <thread>
-
-#include <opencv2/imgproc.hpp>
 
 #include "slamd/common/log.hpp"
 
@@ -30,8 +29,7 @@ void ensureOpenNi() {
   static std::string error;
   std::call_once(once, [] {
     if (openni::OpenNI::initialize() != openni::STATUS_OK) {
-      error = std::string("OpenNI2 initialisation failed: ") +
-              openni::OpenNI::getExtendedError();
+      error = std::string("OpenNI2 initialisation failed: ") + openni::OpenNI::getExtendedError();
     }
   });
   if (!error.empty()) throw SourceError(error);
@@ -92,15 +90,15 @@ bool selectMode(const openni::SensorInfo& info, int width, int height, int fps, 
   for (int i = 0; i < modes.getSize(); ++i) {
     const openni::VideoMode& m = modes[i];
     offered += (offered.empty() ? "" : ", ") + modeText(m);
-    const bool usable = depth ? isDepthFormat(m.getPixelFormat()) : isColorFormat(m.getPixelFormat());
+    const bool usable =
+        depth ? isDepthFormat(m.getPixelFormat()) : isColorFormat(m.getPixelFormat());
     if (!found && usable && m.getResolutionX() == width && m.getResolutionY() == height &&
         m.getFps() == fps) {
       chosen = m;
       found = true;
     }
     // Prefer millimetres and RGB when several formats share the size.
-    if (found && m.getResolutionX() == width && m.getResolutionY() == height &&
-        m.getFps() == fps &&
+    if (found && m.getResolutionX() == width && m.getResolutionY() == height && m.getFps() == fps &&
         (m.getPixelFormat() == openni::PIXEL_FORMAT_DEPTH_1_MM ||
          m.getPixelFormat() == openni::PIXEL_FORMAT_RGB888)) {
       chosen = m;
@@ -241,7 +239,9 @@ struct OpenNi2Source::Impl {
 };
 
 OpenNi2Source::OpenNi2Source(Kind kind, std::string uri, OpenNi2Config config)
-    : kind_(kind), uri_(std::move(uri)), config_(std::move(config)),
+    : kind_(kind),
+      uri_(std::move(uri)),
+      config_(std::move(config)),
       impl_(std::make_unique<Impl>()) {}
 
 OpenNi2Source::~OpenNi2Source() { close(); }
@@ -297,8 +297,8 @@ void openDevice(OpenNi2Source::Kind kind, const std::string& uri, const OpenNi2C
       s.depth.setVideoMode(mode);
     } else {
       SLAMD_LOG_WARN(kComponent) << "depth mode " << config.width << "x" << config.height << "@"
-                                 << config.fps << " not offered (" << offered
-                                 << "); using " << modeText(s.depth.getVideoMode());
+                                 << config.fps << " not offered (" << offered << "); using "
+                                 << modeText(s.depth.getVideoMode());
     }
     if (s.has_color) {
       offered.clear();
@@ -306,9 +306,9 @@ void openDevice(OpenNi2Source::Kind kind, const std::string& uri, const OpenNi2C
                      config.fps, false, mode, offered)) {
         s.color.setVideoMode(mode);
       } else {
-        SLAMD_LOG_WARN(kComponent) << "colour mode " << config.width << "x" << config.height
-                                   << "@" << config.fps << " not offered (" << offered
-                                   << "); using " << modeText(s.color.getVideoMode());
+        SLAMD_LOG_WARN(kComponent)
+            << "colour mode " << config.width << "x" << config.height << "@" << config.fps
+            << " not offered (" << offered << "); using " << modeText(s.color.getVideoMode());
       }
     }
     if (s.has_color && config.registration) {
@@ -322,7 +322,8 @@ void openDevice(OpenNi2Source::Kind kind, const std::string& uri, const OpenNi2C
                                       "colour pixels will not line up exactly";
       }
     }
-    if (s.has_color && config.sync && s.device.setDepthColorSyncEnabled(true) != openni::STATUS_OK) {
+    if (s.has_color && config.sync &&
+        s.device.setDepthColorSyncEnabled(true) != openni::STATUS_OK) {
       SLAMD_LOG_WARN(kComponent) << "depth/colour frame sync not supported; pairing by timestamp";
     }
     if (s.depth.setMirroringEnabled(false) != openni::STATUS_OK ||
@@ -354,8 +355,7 @@ void openDevice(OpenNi2Source::Kind kind, const std::string& uri, const OpenNi2C
     throw SourceError(std::string("cannot start depth stream of '") + uri + "'" + lastError());
   }
   if (s.has_color && s.color.start() != openni::STATUS_OK) {
-    SLAMD_LOG_WARN(kComponent) << "colour stream failed to start" << lastError()
-                               << "; depth only";
+    SLAMD_LOG_WARN(kComponent) << "colour stream failed to start" << lastError() << "; depth only";
     s.color.destroy();
     s.has_color = false;
   }
@@ -363,8 +363,10 @@ void openDevice(OpenNi2Source::Kind kind, const std::string& uri, const OpenNi2C
   const openni::VideoMode mode = s.depth.getVideoMode();
   CameraIntrinsics& k = s.device_intrinsics;
   k = config.camera.intrinsics;
-  const float hfov = s.has_color ? s.color.getHorizontalFieldOfView() : s.depth.getHorizontalFieldOfView();
-  const float vfov = s.has_color ? s.color.getVerticalFieldOfView() : s.depth.getVerticalFieldOfView();
+  const float hfov =
+      s.has_color ? s.color.getHorizontalFieldOfView() : s.depth.getHorizontalFieldOfView();
+  const float vfov =
+      s.has_color ? s.color.getVerticalFieldOfView() : s.depth.getVerticalFieldOfView();
   if (config.intrinsics_from_device && hfov > 0.0f && vfov > 0.0f) {
     k.width = mode.getResolutionX();
     k.height = mode.getResolutionY();
@@ -502,11 +504,11 @@ FrameRead OpenNi2Source::next(std::chrono::milliseconds timeout) {
     s.pending_depth.release();
     s.pending_color.release();
 
-    const std::string what = description() + " frame " + std::to_string(depth_frame.getFrameIndex());
+    const std::string what =
+        description() + " frame " + std::to_string(depth_frame.getFrameIndex());
     const int width = depth_frame.getWidth();
     const int height = depth_frame.getHeight();
-    if (width <= 0 || height <= 0 ||
-        depth_frame.getStrideInBytes() < width * 2 ||
+    if (width <= 0 || height <= 0 || depth_frame.getStrideInBytes() < width * 2 ||
         depth_frame.getDataSize() < depth_frame.getStrideInBytes() * height) {
       return skipFrame(counters_, kComponent, what + ": depth buffer inconsistent with its size");
     }

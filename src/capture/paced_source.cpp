@@ -40,9 +40,9 @@ void PacedSource::open() {
   started_ = false;
   index_ = 0;
   if (inner_->isLive() && config_.mode != PacingMode::kAsFastAsPossible) {
-    SLAMD_LOG_WARN("capture.pacing") << inner_->description()
-                                     << " is live: frames arrive on the device's clock, pacing "
-                                     << pacingModeName(config_.mode) << " ignored";
+    SLAMD_LOG_WARN("capture.pacing")
+        << inner_->description() << " is live: frames arrive on the device's clock, pacing "
+        << pacingModeName(config_.mode) << " ignored";
   }
 }
 

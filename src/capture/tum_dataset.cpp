@@ -125,7 +125,8 @@ std::vector<std::pair<std::size_t, std::size_t>> associateTimestamps(
   std::sort(second_order.begin(), second_order.end(),
             [&](std::size_t a, std::size_t b) { return second_s[a] < second_s[b]; });
   std::vector<double> second_sorted(second_s.size());
-  for (std::size_t i = 0; i < second_order.size(); ++i) second_sorted[i] = second_s[second_order[i]];
+  for (std::size_t i = 0; i < second_order.size(); ++i)
+    second_sorted[i] = second_s[second_order[i]];
 
   struct Candidate {
     double difference;

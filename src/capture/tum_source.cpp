@@ -141,11 +141,11 @@ FrameRead TumSource::readPair(const TumFramePair& pair) {
   frame->received_steady_ns = steadyNowNs();
   const std::string gate_error = gate_.check(*frame, rgb_path);
   if (!gate_error.empty()) {
-    return skipFrame(counters_, kComponent,
-                     gate_error + (raw.size() != cv::Size(frame->intrinsics.width,
-                                                          frame->intrinsics.height)
-                                       ? " (set camera.width/height for this dataset)"
-                                       : ""));
+    return skipFrame(
+        counters_, kComponent,
+        gate_error + (raw.size() != cv::Size(frame->intrinsics.width, frame->intrinsics.height)
+                          ? " (set camera.width/height for this dataset)"
+                          : ""));
   }
   counters_.frameRead();
   return FrameRead{FrameRead::Status::kFrame, std::move(frame), {}};

@@ -36,8 +36,8 @@ bool LcmFramePublisher::publish(const RgbdFrame& frame) {
     }
   } catch (const std::exception& e) {
     ++failures_;
-    SLAMD_LOG_WARN("capture.publish") << "cannot encode frame " << frame.sequence << ": "
-                                      << e.what();
+    SLAMD_LOG_WARN("capture.publish")
+        << "cannot encode frame " << frame.sequence << ": " << e.what();
     return false;
   }
   if (bytes.empty() ||

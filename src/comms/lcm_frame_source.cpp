@@ -1,9 +1,7 @@
 #include "slamd/comms/lcm_frame_source.hpp"
 
-#include <lcm/lcm-cpp.hpp>
-
 #include <cstdio>
-
+#include <lcm/lcm-cpp.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "slamd/capture/image_io.hpp"
@@ -141,8 +139,7 @@ FrameRead LcmFrameSource::next(std::chrono::milliseconds timeout) {
 }
 
 FrameRead LcmFrameSource::decode(const RawMessage& message) {
-  const std::string what =
-      "LCM message #" + std::to_string(message.number) + " on " + channel_;
+  const std::string what = "LCM message #" + std::to_string(message.number) + " on " + channel_;
   const bool is_rgbd = hasFingerprint(message.bytes, slamd::rgbd_frame_t::getHash());
   const bool is_kinect = hasFingerprint(message.bytes, kinect::frame_msg_t::getHash());
   const bool want_rgbd = config_.format != LcmFrameFormat::kKinectFrame;
@@ -151,8 +148,8 @@ FrameRead LcmFrameSource::decode(const RawMessage& message) {
   std::string error;
   try {
     if (is_rgbd && want_rgbd) {
-      auto decoded = decodeMessage<slamd::rgbd_frame_t>(message.bytes.data(), message.bytes.size(),
-                                                        &error);
+      auto decoded =
+          decodeMessage<slamd::rgbd_frame_t>(message.bytes.data(), message.bytes.size(), &error);
       if (!decoded) return skipFrame(counters_, kComponent, what + ": " + error);
       if (decoded->color_encoding == slamd::rgbd_frame_t::COLOR_JPEG) {
         error = strictJpegToRaw(decoded->color_data, false);
@@ -162,14 +159,15 @@ FrameRead LcmFrameSource::decode(const RawMessage& message) {
       }
       frame = std::make_shared<RgbdFrame>(decodeRgbdFrame(*decoded));
     } else if (is_kinect && want_kinect) {
-      auto decoded = decodeMessage<kinect::frame_msg_t>(message.bytes.data(), message.bytes.size(),
-                                                        &error);
+      auto decoded =
+          decodeMessage<kinect::frame_msg_t>(message.bytes.data(), message.bytes.size(), &error);
       if (!decoded) return skipFrame(counters_, kComponent, what + ": " + error);
       if (decoded->image.image_data_format == kinect::image_msg_t::VIDEO_RGB_JPEG) {
         error = strictJpegToRaw(decoded->image.image_data, true);
         if (!error.empty()) return skipFrame(counters_, kComponent, what + ": " + error);
         decoded->image.image_data_format = kinect::image_msg_t::VIDEO_RGB;
-        decoded->image.image_data_nbytes = static_cast<std::int32_t>(decoded->image.image_data.size());
+        decoded->image.image_data_nbytes =
+            static_cast<std::int32_t>(decoded->image.image_data.size());
       }
       frame = std::make_shared<RgbdFrame>(decodeKinectFrame(*decoded, config_.camera.intrinsics));
     } else {

@@ -2,7 +2,6 @@
 
 #include <filesystem>
 #include <fstream>
-
 #include <opencv2/imgcodecs.hpp>
 
 #include "slamd/capture/image_io.hpp"
@@ -179,8 +178,7 @@ TEST(TumBadInput, NonIncreasingTimestampsAreSkippedNamingTheListLine) {
   const auto all = test::readAll(source);
   EXPECT_EQ(all.frames.size(), 3u);
   ASSERT_EQ(all.skip_messages.size(), 1u);
-  EXPECT_NE(all.skip_messages[0].find("rgb.txt line 6"), std::string::npos)
-      << all.skip_messages[0];
+  EXPECT_NE(all.skip_messages[0].find("rgb.txt line 6"), std::string::npos) << all.skip_messages[0];
   EXPECT_EQ(source.stats().frames_skipped, 1u);
 }
 

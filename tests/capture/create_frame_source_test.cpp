@@ -1,7 +1,8 @@
+#include "slamd/sources/create_frame_source.hpp"
+
 #include <gtest/gtest.h>
 
 #include "slamd/capture/paced_source.hpp"
-#include "slamd/sources/create_frame_source.hpp"
 #include "tum_fixture.hpp"
 
 namespace slamd {

@@ -1,11 +1,11 @@
+#include "slamd/comms/lcm_frame_source.hpp"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
-
 #include <lcm/lcm-cpp.hpp>
 
 #include "slamd/comms/lcm_frame_publisher.hpp"
-#include "slamd/comms/lcm_frame_source.hpp"
 #include "slamd/comms/message_codec.hpp"
 #include "tum_fixture.hpp"
 
@@ -18,8 +18,8 @@ RgbdFramePtr makeFrame(int index, int width = 64, int height = 48) {
   auto frame = std::make_shared<RgbdFrame>();
   frame->utime = 1'700'000'000'000'000 + index * 33'333;
   frame->sequence = index;
-  frame->intrinsics = CameraIntrinsics{525.0, 525.0, 31.5, 23.5, width, height,
-                                       DistortionModel::kNone, {}};
+  frame->intrinsics =
+      CameraIntrinsics{525.0, 525.0, 31.5, 23.5, width, height, DistortionModel::kNone, {}};
   frame->color_bgr = test::makeColor(width, height, 42u + static_cast<unsigned>(index));
   frame->depth_m = depthRawToMeters(test::makeDepthRaw(width, height, index), 5000.0);
   ensureGray(*frame);
@@ -221,7 +221,8 @@ TEST(LcmFrameSource, IdleEndFinishesAReplayedStream) {
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(20);
   do {
     read = source.next(std::chrono::milliseconds(100));
-  } while (read.status == FrameRead::Status::kTimeout && std::chrono::steady_clock::now() < deadline);
+  } while (read.status == FrameRead::Status::kTimeout &&
+           std::chrono::steady_clock::now() < deadline);
   EXPECT_EQ(read.status, FrameRead::Status::kEndOfStream);
 }
 

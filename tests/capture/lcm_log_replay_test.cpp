@@ -4,7 +4,6 @@
 // All three list every frame (sequence, utime, depth and colour sums): the lists must be equal.
 
 #include <gtest/gtest.h>
-
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -92,7 +91,8 @@ TEST(LcmLogReplay, LoggedAndReplayedFramesEqualThePublishedOnes) {
                               (dir / "run.log").string() + " 2>&1";
   const int status = std::system(command.c_str());
   ASSERT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0)
-      << "script failed, see " << dir / "run.log" << " and *.err in " << dir;
+      << "script failed, see " << dir / "run.log"
+      << " and *.err in " << dir;
 
   const auto sent = frameLines(dir / "sent.txt");
   const auto live = frameLines(dir / "live.txt");

@@ -1,9 +1,10 @@
+#include "slamd/capture/openni2_source.hpp"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <filesystem>
 
-#include "slamd/capture/openni2_source.hpp"
 #include "test_data.hpp"
 
 namespace slamd {

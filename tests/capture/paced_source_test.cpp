@@ -1,8 +1,9 @@
+#include "slamd/capture/paced_source.hpp"
+
 #include <gtest/gtest.h>
 
 #include <thread>
 
-#include "slamd/capture/paced_source.hpp"
 #include "slamd/capture/preprocessed_source.hpp"
 
 namespace slamd {

@@ -3,12 +3,11 @@
 
 #include <filesystem>
 #include <fstream>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 #include <random>
 #include <string>
 #include <vector>
-
-#include <opencv2/imgcodecs.hpp>
-#include <opencv2/imgproc.hpp>
 
 #include "slamd/capture/tum_source.hpp"
 #include "test_data.hpp"
@@ -43,8 +42,8 @@ struct TumFolder {
 };
 
 /// `count` frames at 30 Hz, colour as PNG or JPEG, depth 3 ms later than colour.
-inline TumFolder writeTumFolder(const std::string& tag, int count, bool jpeg_color,
-                                int width = 64, int height = 48) {
+inline TumFolder writeTumFolder(const std::string& tag, int count, bool jpeg_color, int width = 64,
+                                int height = 48) {
   TumFolder folder;
   folder.dir = makeTempDir(tag);
   std::filesystem::create_directories(folder.dir / "rgb");
@@ -58,7 +57,8 @@ inline TumFolder writeTumFolder(const std::string& tag, int count, bool jpeg_col
     char name[64];
     std::snprintf(name, sizeof(name), "%.6f", t);
     const std::string rgb_name = std::string("rgb/") + name + (jpeg_color ? ".jpg" : ".png");
-    cv::imwrite((folder.dir / rgb_name).string(), makeColor(width, height, 42u + static_cast<unsigned>(i)));
+    cv::imwrite((folder.dir / rgb_name).string(),
+                makeColor(width, height, 42u + static_cast<unsigned>(i)));
     rgb << name << " " << rgb_name << "\n";
     folder.rgb_times.push_back(std::stod(std::string(name)));
     std::snprintf(name, sizeof(name), "%.6f", t + 0.003);

@@ -1,12 +1,12 @@
+#include "slamd/capture/tum_source.hpp"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <opencv2/imgcodecs.hpp>
 #include <random>
 
-#include <opencv2/imgcodecs.hpp>
-
 #include "slamd/capture/tum_dataset.hpp"
-#include "slamd/capture/tum_source.hpp"
 #include "test_data.hpp"
 #include "tum_fixture.hpp"
 

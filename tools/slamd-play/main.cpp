@@ -9,10 +9,9 @@
 #include <csignal>
 #include <cstdio>
 #include <iostream>
+#include <lcm/lcm-cpp.hpp>
 #include <memory>
 #include <sstream>
-
-#include <lcm/lcm-cpp.hpp>
 
 #include "slamd/common/log.hpp"
 #include "slamd/common/program_options.hpp"
@@ -103,8 +102,7 @@ int main(int argc, char** argv) {
       const LcmFramePublisherConfig publish_config = LcmFramePublisherConfig::load(config);
       lcm = std::make_unique<lcm::LCM>(options.value("lcm-url"));
       if (!lcm->good()) {
-        std::cerr << "slamd-play: cannot start LCM with URL '" << options.value("lcm-url")
-                  << "'\n";
+        std::cerr << "slamd-play: cannot start LCM with URL '" << options.value("lcm-url") << "'\n";
         return kExitFailure;
       }
       publisher = std::make_unique<LcmFramePublisher>(*lcm, publish_config);
@@ -160,13 +158,14 @@ int main(int argc, char** argv) {
     const double rate = final_line ? (total_s > 0 ? static_cast<double>(frames) / total_s : 0.0)
                                    : static_cast<double>(frames - frames_at_last_report) /
                                          std::max(interval_s, 1e-9);
-    std::fprintf(stderr,
-                 "%s %.1f s: %llu frames, %.1f Hz; skipped %llu, dropped %llu, reconnects %llu%s%s\n",
-                 final_line ? "total" : "at", total_s, static_cast<unsigned long long>(frames),
-                 rate, static_cast<unsigned long long>(s.frames_skipped),
-                 static_cast<unsigned long long>(s.frames_dropped),
-                 static_cast<unsigned long long>(s.reconnects),
-                 s.last_error.empty() ? "" : "; last error: ", s.last_error.c_str());
+    std::fprintf(
+        stderr,
+        "%s %.1f s: %llu frames, %.1f Hz; skipped %llu, dropped %llu, reconnects %llu%s%s\n",
+        final_line ? "total" : "at", total_s, static_cast<unsigned long long>(frames), rate,
+        static_cast<unsigned long long>(s.frames_skipped),
+        static_cast<unsigned long long>(s.frames_dropped),
+        static_cast<unsigned long long>(s.reconnects),
+        s.last_error.empty() ? "" : "; last error: ", s.last_error.c_str());
     last_report_ns = now_ns;
     frames_at_last_report = frames;
   };
@@ -209,11 +208,13 @@ int main(int argc, char** argv) {
     const PreprocessingStats t = pre->timings();
     std::fprintf(stderr, "source next() per frame: %s\n", summaryText(t.source_next).c_str());
     std::fprintf(stderr, "pre-processing per frame: %s\n", summaryText(t.preprocess).c_str());
-    if (t.range_gate.count) std::fprintf(stderr, "  range gate: %s\n", summaryText(t.range_gate).c_str());
+    if (t.range_gate.count)
+      std::fprintf(stderr, "  range gate: %s\n", summaryText(t.range_gate).c_str());
     if (t.flying_pixels.count) {
       std::fprintf(stderr, "  flying pixels: %s\n", summaryText(t.flying_pixels).c_str());
     }
-    if (t.bilateral.count) std::fprintf(stderr, "  bilateral: %s\n", summaryText(t.bilateral).c_str());
+    if (t.bilateral.count)
+      std::fprintf(stderr, "  bilateral: %s\n", summaryText(t.bilateral).c_str());
   }
   if (publisher) {
     std::fprintf(stderr, "published %llu frames (%.1f MB) on %s, %llu failures\n",

@@ -41,18 +41,18 @@
 namespace slamd {
 
 struct OpenNi2Config {
-  CameraConfig camera;                 ///< camera.* (depth_scale comes from the pixel format)
-  bool intrinsics_from_device = false; ///< capture.openni2.intrinsics: config|device
-  int width = 640;                     ///< capture.openni2.width, pixels, 1..4096
-  int height = 480;                    ///< capture.openni2.height, pixels, 1..4096
-  int fps = 30;                        ///< capture.openni2.fps, 1..120
-  bool registration = true;            ///< capture.openni2.registration (depth to colour)
-  bool sync = true;                    ///< capture.openni2.sync (depth/colour frame sync)
-  bool color = true;                   ///< capture.openni2.color (false: depth only)
-  double frame_timeout_s = 2.0;        ///< capture.openni2.frame_timeout_s, (0, 60]
-  double reconnect_initial_s = 0.5;    ///< capture.openni2.reconnect_initial_s, (0, 60]
-  double reconnect_max_s = 8.0;        ///< capture.openni2.reconnect_max_s, (0, 600]
-  bool oni_realtime = false;           ///< capture.oni.realtime
+  CameraConfig camera;                  ///< camera.* (depth_scale comes from the pixel format)
+  bool intrinsics_from_device = false;  ///< capture.openni2.intrinsics: config|device
+  int width = 640;                      ///< capture.openni2.width, pixels, 1..4096
+  int height = 480;                     ///< capture.openni2.height, pixels, 1..4096
+  int fps = 30;                         ///< capture.openni2.fps, 1..120
+  bool registration = true;             ///< capture.openni2.registration (depth to colour)
+  bool sync = true;                     ///< capture.openni2.sync (depth/colour frame sync)
+  bool color = true;                    ///< capture.openni2.color (false: depth only)
+  double frame_timeout_s = 2.0;         ///< capture.openni2.frame_timeout_s, (0, 60]
+  double reconnect_initial_s = 0.5;     ///< capture.openni2.reconnect_initial_s, (0, 60]
+  double reconnect_max_s = 8.0;         ///< capture.openni2.reconnect_max_s, (0, 600]
+  bool oni_realtime = false;            ///< capture.oni.realtime
 
   static OpenNi2Config load(Config& config);
 };

@@ -27,9 +27,9 @@ enum class PacingMode { kAsFastAsPossible, kRealTime, kFixedRate };
 
 struct PacingConfig {
   PacingMode mode = PacingMode::kAsFastAsPossible;  ///< capture.pacing.mode: fastest|realtime|fixed
-  double speed = 1.0;        ///< capture.pacing.speed, real-time multiplier, (0, 100]
-  double rate_hz = 30.0;     ///< capture.pacing.rate_hz for fixed, (0, 1000]
-  double max_lag_s = 0.1;    ///< capture.pacing.max_lag_s, drop frames later than this, (0, 60]
+  double speed = 1.0;      ///< capture.pacing.speed, real-time multiplier, (0, 100]
+  double rate_hz = 30.0;   ///< capture.pacing.rate_hz for fixed, (0, 1000]
+  double max_lag_s = 0.1;  ///< capture.pacing.max_lag_s, drop frames later than this, (0, 60]
 
   static PacingConfig load(Config& config);
 };

@@ -20,11 +20,11 @@
 namespace slamd {
 
 struct PreprocessingStats {
-  LatencySummary source_next;    ///< wrapped source's next() for delivered frames (read + decode)
+  LatencySummary source_next;  ///< wrapped source's next() for delivered frames (read + decode)
   LatencySummary range_gate;
   LatencySummary flying_pixels;
   LatencySummary bilateral;
-  LatencySummary preprocess;     ///< all pre-processing steps of a frame
+  LatencySummary preprocess;  ///< all pre-processing steps of a frame
 };
 
 class PreprocessedSource : public FrameSource {

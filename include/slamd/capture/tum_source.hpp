@@ -30,10 +30,10 @@
 namespace slamd {
 
 struct TumSourceConfig {
-  CameraConfig camera;                ///< camera.* (depth_scale default 5000)
-  double max_difference_s = 0.02;     ///< capture.tum.max_difference_s, (0, 1]
-  double time_offset_s = 0.0;         ///< capture.tum.time_offset_s added to depth times, [-10, 10]
-  std::string associations;           ///< capture.tum.associations: file (relative to DIR) or ""
+  CameraConfig camera;             ///< camera.* (depth_scale default 5000)
+  double max_difference_s = 0.02;  ///< capture.tum.max_difference_s, (0, 1]
+  double time_offset_s = 0.0;      ///< capture.tum.time_offset_s added to depth times, [-10, 10]
+  std::string associations;        ///< capture.tum.associations: file (relative to DIR) or ""
   std::string groundtruth = "groundtruth.txt";  ///< capture.tum.groundtruth ("" = none)
 
   static TumSourceConfig load(Config& config);
@@ -57,8 +57,8 @@ class TumSource : public FrameSource {
 
  private:
   struct PlayItem {
-    std::size_t pair = 0;     ///< index into pairs_ when message is empty
-    std::string message;      ///< a list line rejected at open(), reported as a skip
+    std::size_t pair = 0;  ///< index into pairs_ when message is empty
+    std::string message;   ///< a list line rejected at open(), reported as a skip
   };
 
   FrameRead readPair(const TumFramePair& pair);

@@ -46,9 +46,9 @@ enum class LcmFrameFormat { kAuto, kRgbdFrame, kKinectFrame };
 struct LcmFrameSourceConfig {
   std::string url;  ///< capture.lcm.url, else lcm.url, else "" (LCM's default, $LCM_DEFAULT_URL)
   LcmFrameFormat format = LcmFrameFormat::kAuto;  ///< capture.lcm.format: auto|rgbd|kinect
-  int queue_capacity = 4;                    ///< capture.lcm.queue_capacity, messages, 1..1000
-  double idle_end_s = 0.0;                   ///< capture.lcm.idle_end_s, 0 = never, [0, 3600]
-  CameraConfig camera;                       ///< camera.*, for kinect.frame_msg_t
+  int queue_capacity = 4;                         ///< capture.lcm.queue_capacity, messages, 1..1000
+  double idle_end_s = 0.0;                        ///< capture.lcm.idle_end_s, 0 = never, [0, 3600]
+  CameraConfig camera;                            ///< camera.*, for kinect.frame_msg_t
 
   static LcmFrameSourceConfig load(Config& config);
 };
