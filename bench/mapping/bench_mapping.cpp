@@ -13,6 +13,7 @@
 #include <benchmark/benchmark.h>
 
 #include <algorithm>
+#include <string>
 #include <vector>
 
 #include "box_room.hpp"
@@ -23,19 +24,28 @@
 namespace slamd {
 namespace {
 
-const std::vector<std::pair<RgbdFrame, SE3>>& frames() {
-  static const std::vector<std::pair<RgbdFrame, SE3>> rendered = [] {
-    std::vector<std::pair<RgbdFrame, SE3>> out;
-    const test::BoxRoom room;
-    Utime utime = 1'000'000;
-    for (const SE3& T : test::lookAroundPoses(8)) {
-      RgbdFrame frame = room.render(T);
-      frame.utime = utime += 33'333;
-      out.emplace_back(std::move(frame), T);
-    }
-    return out;
+std::vector<std::pair<RgbdFrame, SE3>> renderLap(const test::BoxRoom& room) {
+  std::vector<std::pair<RgbdFrame, SE3>> out;
+  Utime utime = 1'000'000;
+  for (const SE3& T : test::lookAroundPoses(8)) {
+    RgbdFrame frame = room.render(T);
+    frame.utime = utime += 33'333;
+    out.emplace_back(std::move(frame), T);
+  }
+  return out;
+}
+
+/// large = false: the 4 x 2.2 x 4.5 m test room; true: a 10 x 3 x 12 m hall, where most rays
+/// run to the 4 m maximum range (the paper-002 scale: about 300,000 valid depths per frame).
+const std::vector<std::pair<RgbdFrame, SE3>>& frames(bool large = false) {
+  static const auto small_lap = renderLap(test::BoxRoom{});
+  static const auto large_lap = [] {
+    test::BoxRoom hall;
+    hall.min_m = Eigen::Vector3d(-5.02, -1.52, -6.02);
+    hall.max_m = Eigen::Vector3d(5.02, 1.52, 6.02);
+    return renderLap(hall);
   }();
-  return rendered;
+  return large ? large_lap : small_lap;
 }
 
 double median(std::vector<double> values) {
@@ -89,15 +99,18 @@ void BM_VoxelFilter(benchmark::State& state) {
 }
 BENCHMARK(BM_VoxelFilter)->ArgsProduct({{50, 20}, {0, 1}})->Unit(benchmark::kMillisecond);
 
-/// Args: resolution in mm, insertion method (0 dense, 1 octomap, 2 octomap_discrete).
+/// Args: resolution in mm, insertion method (0 dense, 1 octomap, 2 octomap_discrete), scene
+/// (0 room, 1 hall).
 void BM_Integrate(benchmark::State& state) {
   const double resolution_m = static_cast<double>(state.range(0)) / 1000.0;
   const auto method = static_cast<InsertionMethod>(state.range(1));
   Mapper mapper(benchConfig(resolution_m, method));
-  const auto& all = frames();
+  const auto& all = frames(state.range(2) != 0);
   // One warm-up lap: afterwards most voxels already exist, as in steady-state mapping.
   for (const auto& [frame, T] : all) mapper.integrate(frame, T);
   std::vector<double> insert_ms;
+  std::vector<double> raycast_ms;
+  std::vector<double> update_ms;
   std::vector<double> frame_ms;
   double points = 0.0;
   double seconds = 0.0;
@@ -106,19 +119,23 @@ void BM_Integrate(benchmark::State& state) {
     const auto& [frame, T] = all[i++ % all.size()];
     const IntegrationResult r = mapper.integrate(frame, T);
     insert_ms.push_back(r.insert_ms);
+    raycast_ms.push_back(r.raycast_ms);
+    update_ms.push_back(r.update_ms);
     frame_ms.push_back(r.cloud_ms + r.filter_ms + r.insert_ms);
     points += static_cast<double>(r.points_filtered);
     seconds += (r.cloud_ms + r.filter_ms + r.insert_ms) / 1000.0;
   }
   state.counters["insert_ms_p50"] = median(insert_ms);
+  state.counters["raycast_ms_p50"] = median(raycast_ms);
+  state.counters["update_ms_p50"] = median(update_ms);
   state.counters["frame_ms_p50"] = median(frame_ms);
   state.counters["points_per_frame"] = points / static_cast<double>(insert_ms.size());
   state.counters["points_per_s"] = seconds > 0.0 ? points / seconds : 0.0;
   state.counters["map_MiB"] = static_cast<double>(mapper.memoryBytes()) / (1 << 20);
-  state.SetLabel(toString(method));
+  state.SetLabel(std::string(toString(method)) + (state.range(2) != 0 ? " hall" : " room"));
 }
 BENCHMARK(BM_Integrate)
-    ->ArgsProduct({{50, 20}, {0, 1, 2}})
+    ->ArgsProduct({{50, 20}, {0, 1, 2}, {0, 1}})
     ->Unit(benchmark::kMillisecond)
     ->MinTime(2.0);
 

@@ -362,6 +362,7 @@ IntegrationResult Mapper::insertCameraCloud(const PointCloud& cloud_camera,
 template <typename Tree>
 void Mapper::insertIntoTree(Tree& tree, const octomap::point3d& origin,
                             const PointCloud& cloud_camera, IntegrationResult& result) {
+  const auto start = Clock::now();
   Scratch& s = *scratch_;
   // s.points_world holds cloud_camera moved into the map frame (insertCameraCloud).
   s.ends.clear();
@@ -435,6 +436,8 @@ void Mapper::insertIntoTree(Tree& tree, const octomap::point3d& origin,
     s.occupied_keys.assign(occupied_cells.begin(), occupied_cells.end());
   }
 
+  result.raycast_ms = msSince(start);
+  const auto update_start = Clock::now();
   // Lazy evaluation: leaves only; inner nodes are refreshed when read (ensureInnerOccupancy).
   for (const octomap::OcTreeKey& key : s.free_keys) tree.updateNode(key, false, true);
   for (const octomap::OcTreeKey& key : s.occupied_keys) tree.updateNode(key, true, true);
@@ -450,6 +453,7 @@ void Mapper::insertIntoTree(Tree& tree, const octomap::point3d& origin,
       }
     }
   }
+  result.update_ms = msSince(update_start);
 }
 
 bool Mapper::keepKeyframe(std::int64_t id, const PointCloud& cloud, const SE3& T_world_camera,

@@ -66,6 +66,8 @@ struct IntegrationResult {
   double cloud_ms = 0.0;   ///< depth -> cloud
   double filter_ms = 0.0;  ///< voxel-grid filter
   double insert_ms = 0.0;  ///< transform + ray casting + OcTree update
+  double raycast_ms = 0.0;  ///< of insert_ms: rays and the frame's distinct voxels
+  double update_ms = 0.0;   ///< of insert_ms: OcTree updates (and colours)
 };
 
 /// Totals since construction (the daemon publishes them on the status channel).
