@@ -111,7 +111,8 @@ TEST_F(SceneMotions, EveryTrajectoryLooksAtGeometryWithinSensorRange) {
       const Trajectory trajectory = sampleTrajectory(motion, motion.naturalFrameCount(), 0, 30.0);
       double worst_in_range = 1.0;
       double min_depth = 100.0;
-      for (std::size_t i = 0; i < trajectory.size(); i += 10) {
+      const std::size_t stride = std::max<std::size_t>(1, trajectory.size() / 50);
+      for (std::size_t i = 0; i < trajectory.size(); i += stride) {
         renderer.render(trajectory[i].T_world_camera, out);
         const cv::Mat in_range = (out.depth_m >= 0.5) & (out.depth_m <= 4.5);
         worst_in_range = std::min(
