@@ -17,11 +17,6 @@ DaemonConfig DaemonConfig::load(Config& config) {
   c.publish_queue = config.getInt("daemon.publish_queue", c.publish_queue, 1, 1000);
   c.mapping_queue = config.getInt("daemon.mapping_queue", c.mapping_queue, 1, 1000);
   c.publish_frames = config.getBool("daemon.publish_frames", c.publish_frames);
-  c.frame_color_encoding =
-      config.getChoice("daemon.frame_color_encoding", c.frame_color_encoding, {"jpeg", "png", "rgb8"});
-  c.frame_jpeg_quality = config.getInt("daemon.frame_jpeg_quality", c.frame_jpeg_quality, 1, 100);
-  c.frame_depth_encoding =
-      config.getChoice("daemon.frame_depth_encoding", c.frame_depth_encoding, {"png", "zlib"});
   c.mapping_enabled = config.getBool("mapping.enabled", c.mapping_enabled);
   c.map_keyframes_only = config.getBool("mapping.keyframes_only", c.map_keyframes_only);
   c.map_save_path = config.getString("daemon.map_save_path", c.map_save_path);

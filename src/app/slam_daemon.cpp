@@ -14,12 +14,13 @@
 #include "slamd/comms/channels.hpp"
 #include "slamd/comms/frame_codec.hpp"
 #include "slamd/comms/lcm_bus.hpp"
+#include "slamd/comms/lcm_frame_publisher.hpp"
 #include "slamd/comms/map_codec.hpp"
 #include "slamd/comms/pose_codec.hpp"
 #include "slamd/comms/status_codec.hpp"
 #include "slamd/pipeline/pipeline.hpp"
 #include "slamd/mapping/mapper.hpp"
-#include "slamd/sources/source_factory.hpp"
+#include "slamd/sources/create_frame_source.hpp"
 
 namespace slamd {
 
@@ -43,6 +44,7 @@ struct SlamDaemon::Impl {
   TrackingConfig tracking_config;
   FilterConfig filter_config;
   MappingConfig mapping_config;
+  LcmFramePublisherConfig frame_publisher_config;
   std::unique_ptr<FrameSource> source;
   /// Owned by the mapping thread while the pipeline runs, by the control thread after it stopped.
   std::unique_ptr<Mapper> mapper;
@@ -84,6 +86,7 @@ struct SlamDaemon::Impl {
     tracking_config = TrackingConfig::load(config);
     filter_config = FilterConfig::load(config);
     mapping_config = MappingConfig::load(config);
+    if (daemon.publish_frames) frame_publisher_config = LcmFramePublisherConfig::load(config);
     if (daemon.mapping_enabled) mapper = std::make_unique<Mapper>(mapping_config);
     // The source reads its own sections (camera.*, capture.*, synthetic.*) now, so that every
     // configuration error surfaces before anything starts.
@@ -222,14 +225,9 @@ int SlamDaemon::Impl::run(ShutdownSignals& signals) {
   // repeatable); live and real-time sources must never be held up, so their frames are dropped
   // oldest-first and counted.
   const EdgePolicy capture_policy = live ? EdgePolicy::kDropOldest : EdgePolicy::kBackpressure;
-  const FrameEncodeOptions frame_encoding = [&] {
-    FrameEncodeOptions options;
-    options.color = parseColorEncoding(daemon.frame_color_encoding);
-    options.jpeg_quality = daemon.frame_jpeg_quality;
-    options.depth = parseDepthEncoding(daemon.frame_depth_encoding);
-    options.depth_scale = 1000.0;
-    return options;
-  }();
+  // Frames are republished from the capture thread, which alone uses this publisher.
+  std::optional<LcmFramePublisher> frame_publisher;
+  if (daemon.publish_frames) frame_publisher.emplace(bus->connection(), frame_publisher_config);
 
   Pipeline pipeline(PipelineMode::kThreaded);
   std::int64_t last_emit_ns = steadyNowNs();
@@ -255,9 +253,7 @@ int SlamDaemon::Impl::run(ShutdownSignals& signals) {
       auto frame = std::make_shared<RgbdFrame>(*read.frame);  // shallow: images are shared
       if (frame->received_steady_ns == 0) frame->received_steady_ns = steadyNowNs();
       ensureGray(*frame);
-      if (daemon.publish_frames) {
-        bus->publishMessage(channels.frames, encodeRgbdFrame(*frame, frame_encoding));
-      }
+      if (frame_publisher) frame_publisher->publish(*frame);
       last_emit_ns = steadyNowNs();
       return SourceStep<CapturePacket>::of(CapturePacket{std::move(frame)});
     }

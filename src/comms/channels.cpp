@@ -24,7 +24,6 @@ ChannelConfig ChannelConfig::load(Config& config) {
   c.map = channelName(config, "map", c.map);
   c.status = channelName(config, "status", c.status);
   c.command = channelName(config, "command", c.command);
-  c.frames = channelName(config, "frames", c.frames);
   return c;
 }
 

@@ -38,15 +38,10 @@ struct DaemonConfig {
   /// daemon.mapping_queue (int, default 2, 1..1000): frames waiting for mapping; live runs skip to
   /// the newest (the map only needs recent views), datasets played as fast as possible wait.
   int mapping_queue = 2;
-  /// daemon.publish_frames (bool, default false): republish every processed frame on
-  /// channels.frames (so lcm-logger captures the input and a log can be replayed into slamd).
+  /// daemon.publish_frames (bool, default false): republish every processed frame (channel and
+  /// encodings: capture.publish.*), so lcm-logger captures the input and a log can be replayed
+  /// into slamd.
   bool publish_frames = false;
-  /// daemon.frame_color_encoding (jpeg|png|rgb8, default jpeg), daemon.frame_jpeg_quality (int,
-  /// default 90, 1..100) and daemon.frame_depth_encoding (png|zlib, default png) for
-  /// republished frames (png/rgb8 colour + any depth encoding is lossless).
-  std::string frame_color_encoding = "jpeg";
-  int frame_jpeg_quality = 90;
-  std::string frame_depth_encoding = "png";
   /// mapping.enabled (bool, default true): run the mapping stage (voxel filter + OctoMap).
   bool mapping_enabled = true;
   /// mapping.keyframes_only (bool, default false): integrate only keyframes instead of every

@@ -18,7 +18,7 @@ struct ChannelConfig {
   std::string map = "SLAMD_MAP";                  ///< channels.map: full map
   std::string status = "SLAMD_STATUS";            ///< channels.status: 1 Hz
   std::string command = "SLAMD_COMMAND";          ///< channels.command: slamd.command_t in
-  std::string frames = "SLAMD_FRAMES";            ///< channels.frames: slamd.rgbd_frame_t
+  // Republished frames go to capture.publish.channel (LcmFramePublisherConfig).
 
   /// Reads lcm.url and channels.*; a channel name must be non-empty and without spaces.
   static ChannelConfig load(Config& config);

@@ -91,6 +91,9 @@ class LcmBus {
   std::uint64_t malformedCount(const std::string& channel) const;
   std::uint64_t malformedTotal() const;
   const std::string& url() const { return url_; }
+  /// The underlying connection, for components written against lcm::LCM (thread-safe to
+  /// publish on; do not call handle() on it while startHandling() runs).
+  lcm::LCM& connection() { return lcm_; }
 
  private:
   struct Subscription {

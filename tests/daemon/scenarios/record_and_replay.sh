@@ -7,18 +7,15 @@ source "$(dirname "$0")/lib.sh"
 private_network
 cd "$WORK"
 FRAMES=90
-# 320x240 keeps each frame message near 100 kB, so loopback multicast never drops fragments.
-COMMON=(--config "$SLAMD_SOURCE_DIR/config/synthetic.yaml" --log-level warn
-        --set camera.width=320 --set camera.height=240 --set camera.fx=262.5 --set camera.fy=262.5
-        --set camera.cx=159.5 --set camera.cy=119.5)
+COMMON=(--config "$SLAMD_SOURCE_DIR/config/synthetic.yaml" --log-level warn "${SMALL_CAMERA[@]}")
 
 start_logger run.lcmlog
 start_pose_log poses_live.txt
 "$SLAMD_BIN/slamd" "${COMMON[@]}" --source synthetic:room --set synthetic.frames=$FRAMES \
-  --set daemon.publish_frames=true --set daemon.frame_color_encoding=png \
+  --set daemon.publish_frames=true --set capture.publish.color=png \
   --trajectory-out trajectory_live.txt --groundtruth-out groundtruth.txt --map-out map_live.bt \
   || fail "slamd exited with $?"
-wait_for 10 "all $FRAMES live poses logged" test "$(count_poses poses_live.txt)" -ge $FRAMES
+wait_for 10 "all $FRAMES live poses logged" has_poses poses_live.txt $FRAMES
 stop_process $POSE_LOG_PID
 stop_process $LOGGER_PID
 
@@ -54,7 +51,7 @@ start_pose_log poses_replay.txt
 SLAMD_PID=$!
 wait_for 20 "the replay slamd to subscribe" "$SLAMD_BIN/slamd-status" --once --timeout 1 --log-level error
 lcm-logplayer -s 0.5 -e SLAMD_FRAMES run.lcmlog
-wait_for 20 "all $FRAMES replayed poses" test "$(count_poses poses_replay.txt)" -ge $FRAMES
+wait_for 20 "all $FRAMES replayed poses" has_poses poses_replay.txt $FRAMES
 kill -INT $SLAMD_PID
 wait $SLAMD_PID || fail "replay slamd exited with $?"
 stop_process $POSE_LOG_PID

@@ -5,10 +5,10 @@ private_network
 cd "$WORK"
 start_pose_log poses.txt
 "$SLAMD_BIN/slamd" --config "$SLAMD_SOURCE_DIR/config/synthetic.yaml" --log-level warn \
-  --source synthetic:room --set synthetic.frames=900 --set capture.pacing.mode=realtime \
+  "${SMALL_CAMERA[@]}" --source synthetic:room --set synthetic.frames=900 \
   --trajectory-out trajectory.txt --map-out map.bt &
 SLAMD_PID=$!
-wait_for 60 "30 poses" test "$(count_poses poses.txt)" -ge 30
+wait_for 60 "30 poses" has_poses poses.txt 30
 kill -INT $SLAMD_PID
 set +e
 wait $SLAMD_PID
