@@ -28,11 +28,12 @@ struct TrackingConfig {
   /// buckets; each bucket keeps at most max_features / (cols * rows) of its strongest features.
   int grid_cols = 8;
   int grid_rows = 6;
-  /// tracking.orb_levels (int, default 8, range [1, 12]): ORB pyramid levels (scale 1.2).
-  int orb_levels = 8;
-  /// tracking.orb_fast_threshold (int, default 12, range [1, 100]): ORB FAST threshold, grey
-  /// levels.
-  int orb_fast_threshold = 12;
+  /// tracking.orb_levels (int, default 3, range [1, 12]): ORB pyramid levels (scale 1.2). Few
+  /// levels: fr1/xyz-like motion needs little scale range, and it halves extraction time.
+  int orb_levels = 3;
+  /// tracking.orb_fast_threshold (int, default 20, range [1, 100]): ORB FAST threshold, grey
+  /// levels (stronger corners localise better).
+  int orb_fast_threshold = 20;
   /// tracking.subpixel (bool, default true): refine level-0 ORB/FAST corners to sub-pixel.
   bool subpixel = true;
   /// tracking.patch_refinement (bool, default true): refine each inlier's position in the current
