@@ -31,10 +31,22 @@ std::string formatDouble(double value) {
   return buffer;
 }
 
+// cv::FileStorage keeps an inline comment ("false  # explanation") as part of an unquoted
+// string value; in YAML a '#' after whitespace starts a comment, so it is cut off here.
+std::string withoutInlineComment(const std::string& text) {
+  for (std::size_t i = 1; i < text.size(); ++i) {
+    if (text[i] == '#' && (text[i - 1] == ' ' || text[i - 1] == '\t')) {
+      const auto end = text.find_last_not_of(" \t", i - 1);
+      return end == std::string::npos ? "" : text.substr(0, end + 1);
+    }
+  }
+  return text;
+}
+
 std::string scalarText(const cv::FileNode& node) {
   if (node.isInt()) return std::to_string(static_cast<int>(node));
   if (node.isReal()) return formatDouble(static_cast<double>(node));
-  if (node.isString()) return static_cast<std::string>(node);
+  if (node.isString()) return withoutInlineComment(static_cast<std::string>(node));
   return "";
 }
 

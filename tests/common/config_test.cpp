@@ -55,6 +55,16 @@ TEST(Config, ReadsAFileWithoutYamlDirective) {
   EXPECT_EQ(config.getInt("tracking.max_features", 1000, 10, 10000), 800);
 }
 
+TEST(Config, InlineCommentsAreNotPartOfValues) {
+  Config config = Config::fromYamlString(
+      "a:\n  flag: false   # explanation\n  count: 3  # three\n  name: orb # the default\n"
+      "  quoted: \"x # y\"\n  hash: a#b\n");
+  EXPECT_FALSE(config.getBool("a.flag", true));
+  EXPECT_EQ(config.getInt("a.count", 0, 0, 10), 3);
+  EXPECT_EQ(config.getString("a.name", ""), "orb");
+  EXPECT_EQ(config.getString("a.hash", ""), "a#b");
+}
+
 TEST(Config, MissingFileIsAConfigError) {
   EXPECT_THROW(Config::fromFile("/nonexistent/slamd.yaml"), ConfigError);
 }
