@@ -99,15 +99,32 @@ void VisualOdometry::reset() {
 }
 
 OdometryResult VisualOdometry::processFrame(const RgbdFramePtr& frame) {
-  if (!frame) {
-    RgbdFrame empty;
-    return process(empty, nullptr);
-  }
-  return process(*frame, frame);
+  if (!frame) return processFrame(RgbdFrame());
+  return guardedProcess(*frame, frame);
 }
 
 OdometryResult VisualOdometry::processFrame(const RgbdFrame& frame) {
-  return process(frame, nullptr);
+  return guardedProcess(frame, nullptr);
+}
+
+OdometryResult VisualOdometry::guardedProcess(const RgbdFrame& frame,
+                                              const RgbdFramePtr& frame_ptr) {
+  try {
+    return process(frame, frame_ptr);
+  } catch (const std::exception&) {
+    // Last resort (an OpenCV error on unforeseen input, allocation failure): report the frame as
+    // failed and keep the state as it was; processFrame never throws.
+    OdometryResult r;
+    r.utime = frame.utime;
+    r.sequence = frame.sequence;
+    r.status = OdometryStatus::kOptimizationFailure;
+    r.tracking_state = state_;
+    r.T_world_camera = T_world_prev_;
+    r.covariance = Matrix6d::Identity() * kLostCovariance;
+    r.covariance_ref_curr = r.covariance;
+    r.segment = segment_;
+    return r;
+  }
 }
 
 void VisualOdometry::matchGuided(const FeatureSet& ref, const SE3& T_ref_curr_prior,

@@ -127,6 +127,7 @@ class VisualOdometry {
   struct TrackAttempt;
   struct CurrentFrame;
 
+  OdometryResult guardedProcess(const RgbdFrame& frame, const RgbdFramePtr& frame_ptr);
   OdometryResult process(const RgbdFrame& frame, const RgbdFramePtr& frame_ptr);
   void matchGuided(const FeatureSet& ref, const SE3& T_ref_curr_prior, const CurrentFrame& curr,
                    double radius_px, std::vector<Correspondence>& matches) const;
