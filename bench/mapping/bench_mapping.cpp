@@ -134,10 +134,15 @@ void BM_Integrate(benchmark::State& state) {
   state.counters["map_MiB"] = static_cast<double>(mapper.memoryBytes()) / (1 << 20);
   state.SetLabel(std::string(toString(method)) + (state.range(2) != 0 ? " hall" : " room"));
 }
+// Every method at 5 cm in both scenes; at 2 cm OctoMap's own insertion takes seconds per hall
+// frame, so only the room compares methods there.
 BENCHMARK(BM_Integrate)
-    ->ArgsProduct({{50, 20}, {0, 1, 2}, {0, 1}})
+    ->ArgsProduct({{50}, {0, 1, 2}, {0, 1}})
+    ->Args({20, 0, 0})
+    ->Args({20, 1, 0})
+    ->Args({20, 0, 1})
     ->Unit(benchmark::kMillisecond)
-    ->MinTime(2.0);
+    ->MinTime(1.0);
 
 /// Message sizes and the cost of producing a full map at 5 cm and 2 cm (second argument:
 /// mapping.update_new_free_voxels). Updates are taken every

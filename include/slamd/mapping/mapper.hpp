@@ -8,8 +8,8 @@
 //   for each frame with its pose:
 //     IntegrationResult r = mapper.integrate(*frame, T_world_camera, keyframe_id_or_nullopt);
 //     MapperOutputs out = mapper.poll(frame->utime);   // due updates / full map / snapshot
-//     if (out.update) publish(encodeMapUpdate(*out.update));
-//     if (out.full_map) publish(encodeFullMap(*out.full_map));
+//     if (out.update) publish(toMapUpdateMessage(*out.update));    // slamd/comms/map_codec.hpp
+//     if (out.full_map) publish(toFullMapMessage(*out.full_map));
 //   on PUBLISH_MAP: mapper.requestFullMap();  on SAVE_MAP / shutdown: mapper.saveMaps(prefix);
 //   on corrected keyframe poses from the back end: mapper.rebuild(poses);
 //
