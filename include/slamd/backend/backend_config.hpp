@@ -1,0 +1,89 @@
+#pragma once
+// BackendConfig: every option of the back end (pose graph, optimiser, place recognition), read
+// from the `backend.*` keys.
+//
+//   Config config = Config::fromFile("config/synthetic.yaml");
+//   BackendConfig backend = BackendConfig::load(config);   // throws ConfigError when invalid
+//
+// Each member documents its key, type, default, allowed range and unit.
+
+#include <string>
+
+#include "slamd/common/config.hpp"
+
+namespace slamd {
+
+/// Robust kernel applied to the whitened error of an edge (key backend.robust_kernel).
+enum class RobustKernel { kNone, kHuber, kCauchy };
+
+const char* robustKernelName(RobustKernel kernel);
+
+struct BackendConfig {
+  /// backend.enabled (bool, default false): run the back end (loop closing, pose graph).
+  bool enabled = false;
+
+  // --- Pose-graph optimisation ----------------------------------------------------------------
+  /// backend.robust_kernel (choice none|huber|cauchy, default cauchy): kernel on robust edges
+  /// (loop edges; odometry edges too when robust_odometry_edges). Cauchy rejects wrong loops
+  /// almost completely (it is warm-started with Huber); Huber only bounds their pull.
+  RobustKernel robust_kernel = RobustKernel::kCauchy;
+  /// backend.robust_kernel_width (double, default 2.0, range [0.01, 100], unit: whitened
+  /// error, i.e. standard deviations): where the kernel leaves the quadratic.
+  double robust_kernel_width = 2.0;
+  /// backend.robust_odometry_edges (bool, default false): apply the kernel to odometry edges.
+  bool robust_odometry_edges = false;
+  /// backend.max_iterations (int, default 30, range [1, 1000]): Levenberg-Marquardt iterations.
+  int max_iterations = 30;
+  /// backend.initial_lambda (double, default 1e-4, range [1e-12, 1e6], unitless): initial LM
+  /// damping, relative to the diagonal of the normal equations.
+  double initial_lambda = 1e-4;
+  /// backend.relative_cost_tolerance (double, default 1e-9, range [0, 1]): stop when an accepted
+  /// step lowers the cost by less than this fraction.
+  double relative_cost_tolerance = 1e-9;
+  /// backend.step_tolerance (double, default 1e-9, range [0, 1], unit: tangent norm, metres /
+  /// radians): stop when the update is this small.
+  double step_tolerance = 1e-9;
+
+  // --- Place recognition ----------------------------------------------------------------------
+  /// backend.vocabulary_branching (int, default 8, range [2, 32]): children per vocabulary node.
+  int vocabulary_branching = 8;
+  /// backend.vocabulary_depth (int, default 3, range [1, 6]): levels of the vocabulary tree
+  /// (words = branching^depth at most).
+  int vocabulary_depth = 3;
+  /// backend.loop_min_score (double, default 0.05, range [0, 1], unitless): minimum TF-IDF
+  /// cosine similarity (L1-normalised BoW vectors, score in [0, 1]) of a loop candidate.
+  double loop_min_score = 0.05;
+  /// backend.loop_min_score_ratio (double, default 0.5, range [0, 10], unitless): minimum score
+  /// relative to the score against the previous keyframe (0 disables).
+  double loop_min_score_ratio = 0.5;
+  /// backend.loop_exclude_recent (int, default 20, range [0, 100000], keyframes): the latest
+  /// keyframes never considered as loop candidates.
+  int loop_exclude_recent = 20;
+  /// backend.loop_max_candidates (int, default 5, range [1, 100]): candidates verified per
+  /// keyframe.
+  int loop_max_candidates = 5;
+  /// backend.loop_min_inliers (int, default 40, range [6, 10000]): RANSAC + refinement inliers
+  /// for a geometrically verified loop.
+  int loop_min_inliers = 40;
+  /// backend.loop_inlier_threshold_px (double, default 3.0, range [0.5, 50], pixels): RANSAC
+  /// reprojection threshold.
+  double loop_inlier_threshold_px = 3.0;
+  /// backend.loop_ransac_iterations (int, default 200, range [10, 100000]).
+  int loop_ransac_iterations = 200;
+  /// backend.loop_match_ratio (double, default 0.8, range [0.3, 1.0]): descriptor ratio test.
+  double loop_match_ratio = 0.8;
+  /// backend.loop_max_descriptor_distance (int, default 64, range [1, 256], bits): Hamming
+  /// distance above which a match is discarded.
+  int loop_max_descriptor_distance = 64;
+  /// backend.loop_consistency (int, default 2, range [1, 20], keyframes): consecutive
+  /// keyframes whose verified candidates must agree (neighbouring ids) before a loop is accepted.
+  int loop_consistency = 2;
+  /// backend.loop_consistency_window (int, default 5, range [0, 1000], keyframe ids): how far
+  /// apart two candidate ids may be and still count as the same place.
+  int loop_consistency_window = 5;
+
+  /// Reads and validates backend.*; throws ConfigError.
+  static BackendConfig load(Config& config);
+};
+
+}  // namespace slamd
