@@ -8,8 +8,10 @@
 //   if (vp.status == VanishingPointStatus::kOk) ekf.updateVanishingPoint(vp.pixel,
 //                                                                        vp.pixel_covariance);
 //
-// Steps: resize by image_scale (default 0.5), optional Gaussian blur, Canny edges, probabilistic Hough segments (or OpenCV's LSD on the
-// grey image), optional removal of segments nearly parallel to the image axes (paper 002), then
+// Steps: resize by image_scale (default 0.5, area averaging), optional Gaussian blur, Canny edges,
+// probabilistic Hough segments, each refit by least squares to the edge pixels within one pixel
+// of it (or OpenCV's LSD on the resized grey image), segments scaled back to full-resolution
+// pixels, optional removal of segments nearly parallel to the image axes (paper 002), then
 // RANSAC over segment pairs: each pair's intersection is scored by the summed length of the
 // segments pointing at it (angle between the segment and the ray from its midpoint to the point
 // below `inlier_angle_deg`). The best candidate is refined by least squares on its inliers with
