@@ -50,6 +50,11 @@ BackendConfig BackendConfig::load(Config& config) {
   c.loop_consistency = config.getInt("backend.loop_consistency", c.loop_consistency, 1, 20);
   c.loop_consistency_window =
       config.getInt("backend.loop_consistency_window", c.loop_consistency_window, 0, 1000);
+  c.loop_check_odometry = config.getBool("backend.loop_check_odometry", c.loop_check_odometry);
+  c.loop_max_drift_m =
+      config.getDouble("backend.loop_max_drift_m", c.loop_max_drift_m, 0.0, 1000.0);
+  c.loop_max_drift_ratio =
+      config.getDouble("backend.loop_max_drift_ratio", c.loop_max_drift_ratio, 0.0, 10.0);
   return c;
 }
 

@@ -82,6 +82,18 @@ struct BackendConfig {
   /// apart two candidate ids may be and still count as the same place.
   int loop_consistency_window = 5;
 
+  /// backend.loop_check_odometry (bool, default true): reject a verified loop whose relative
+  /// pose disagrees with the odometry poses of the two keyframes (same tracking segment only) by
+  /// more than loop_max_drift_m + loop_max_drift_ratio * path length between them. Repeated
+  /// textures and uniform corridors make distant places look and fit alike (perceptual
+  /// aliasing); odometry drift is far smaller than such jumps.
+  bool loop_check_odometry = true;
+  /// backend.loop_max_drift_m (double, default 1.0, range [0, 1000], metres).
+  double loop_max_drift_m = 1.0;
+  /// backend.loop_max_drift_ratio (double, default 0.1, range [0, 10], metres per metre
+  /// travelled).
+  double loop_max_drift_ratio = 0.1;
+
   /// Reads and validates backend.*; throws ConfigError.
   static BackendConfig load(Config& config);
 };

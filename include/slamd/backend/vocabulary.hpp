@@ -1,0 +1,76 @@
+#pragma once
+// Vocabulary: a bag-of-words vocabulary tree over 256-bit binary descriptors (ORB), trained by
+// slamd itself with hierarchical k-majority clustering (k-means for Hamming space: centres are
+// bitwise majorities of their members, seeded k-means++ style), TF-IDF weighted.
+//
+// Usage (build once, then read-only; safe to share between threads once built):
+//   std::vector<cv::Mat> training;                  // ORB descriptors, one Mat per image
+//   Vocabulary vocabulary = Vocabulary::train(training, /*branching=*/8, /*depth=*/3, 42);
+//   BowVector a = vocabulary.transform(keyframe_a.features.descriptors);
+//   BowVector b = vocabulary.transform(keyframe_b.features.descriptors);
+//   double similarity = bowScore(a, b);              // 0 = nothing in common, 1 = identical
+//
+// A descriptor is quantised by descending the tree to the nearest centre (Hamming distance) at
+// every level; the leaf is its word. Word weights: tf-idf, tf = occurrences / descriptors in the
+// image, idf = log(training images / training images containing the word). Vectors are
+// L1-normalised and compared with the L1 score 1 - |a - b|_1 / 2 = sum over common words of
+// min(a_w, b_w).
+
+#include <array>
+#include <cstdint>
+#include <iosfwd>
+#include <utility>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+namespace slamd {
+
+/// A 256-bit binary descriptor as four 64-bit words.
+using BinaryDescriptor = std::array<std::uint64_t, 4>;
+
+int hammingDistance(const BinaryDescriptor& a, const BinaryDescriptor& b);
+/// Row `row` of a CV_8U descriptor matrix with 32 columns.
+BinaryDescriptor binaryDescriptorRow(const cv::Mat& descriptors, int row);
+
+/// Sparse word weights, sorted by word id, L1-normalised (sum of weights 1, or empty).
+using BowVector = std::vector<std::pair<int, double>>;
+
+/// Similarity of two L1-normalised BoW vectors in [0, 1].
+double bowScore(const BowVector& a, const BowVector& b);
+
+class Vocabulary {
+ public:
+  /// Trains a tree of at most branching^depth words from descriptors of several images (each a
+  /// CV_8U matrix with 32 columns; other types are skipped). Deterministic for a given seed.
+  /// An empty training set gives an empty vocabulary (transform() then returns empty vectors).
+  static Vocabulary train(const std::vector<cv::Mat>& image_descriptors, int branching,
+                          int depth, std::uint64_t seed);
+
+  bool empty() const { return num_words_ == 0; }
+  int numWords() const { return num_words_; }
+  /// The word of one descriptor (-1 for an empty vocabulary).
+  int word(const BinaryDescriptor& descriptor) const;
+  /// The tf-idf vector of one image's descriptors (CV_8U, 32 columns; else empty).
+  BowVector transform(const cv::Mat& descriptors) const;
+  double idf(int word) const { return idf_[static_cast<std::size_t>(word)]; }
+
+  /// Binary serialisation (little-endian host layout); read returns false on malformed input.
+  void write(std::ostream& out) const;
+  bool read(std::istream& in);
+
+ private:
+  struct Node {
+    BinaryDescriptor centre{};
+    std::vector<int> children;  ///< node indices; empty for a leaf
+    int word = -1;              ///< word id of a leaf
+  };
+  void build(int node, const std::vector<BinaryDescriptor>& data, const std::vector<int>& members,
+             int level, int branching, int depth, std::uint64_t seed);
+
+  std::vector<Node> nodes_;  ///< nodes_[0] is the root
+  std::vector<double> idf_;  ///< per word
+  int num_words_ = 0;
+};
+
+}  // namespace slamd

@@ -1,0 +1,284 @@
+#include "slamd/backend/loop_detector.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+
+#include "slamd/tracking/motion_estimation.hpp"
+
+namespace slamd {
+
+namespace {
+
+bool hasBinaryDescriptors(const FeatureSet& features) {
+  return !features.descriptors.empty() && features.descriptors.type() == CV_8UC1 &&
+         features.descriptors.cols == 32 &&
+         static_cast<std::size_t>(features.descriptors.rows) == features.size() &&
+         features.points.size() == features.size() && features.pixels.size() == features.size();
+}
+
+// Floor on the loop edge's standard deviations: the refinement's covariance assumes perfect
+// matches and is overconfident for a loop measured across a long interval.
+constexpr double kMinSigmaM = 0.01;
+constexpr double kMinSigmaRad = 0.5 * M_PI / 180.0;
+
+}  // namespace
+
+const char* loopStatusName(LoopStatus status) {
+  switch (status) {
+    case LoopStatus::kLoopFound: return "loop_found";
+    case LoopStatus::kNoCandidate: return "no_candidate";
+    case LoopStatus::kGeometryRejected: return "geometry_rejected";
+    case LoopStatus::kAwaitingConsistency: return "awaiting_consistency";
+    case LoopStatus::kUnsupportedDescriptors: return "unsupported_descriptors";
+    case LoopStatus::kOdometryRejected: return "odometry_rejected";
+  }
+  return "unknown";
+}
+
+LoopDetector::LoopDetector(const BackendConfig& config,
+                           std::shared_ptr<const Vocabulary> vocabulary)
+    : config_(config), vocabulary_(std::move(vocabulary)) {}
+
+std::vector<LoopDetector::Candidate> LoopDetector::retrieve(const BowVector& bow,
+                                                            std::size_t num_searchable,
+                                                            double min_score) const {
+  std::vector<double> scores(num_searchable, 0.0);
+  for (const auto& [word, weight] : bow) {
+    const auto it = inverted_.find(word);
+    if (it == inverted_.end()) continue;
+    for (const auto& [entry, entry_weight] : it->second) {
+      if (static_cast<std::size_t>(entry) < num_searchable) {
+        scores[static_cast<std::size_t>(entry)] += std::min(weight, entry_weight);
+      }
+    }
+  }
+  std::vector<Candidate> candidates;
+  for (std::size_t e = 0; e < num_searchable; ++e) {
+    if (scores[e] >= min_score && scores[e] > 0.0) {
+      candidates.push_back({static_cast<int>(e), scores[e]});
+    }
+  }
+  std::sort(candidates.begin(), candidates.end(),
+            [](const Candidate& a, const Candidate& b) { return a.score > b.score; });
+  return candidates;
+}
+
+bool LoopDetector::verify(const FeatureSet& query, const CameraIntrinsics& intrinsics,
+                          const Entry& e, LoopDetection& detection) {
+  const FeatureSet& ref = e.features;
+  std::vector<int> ref_rows;
+  std::vector<BinaryDescriptor> ref_descriptors;
+  for (std::size_t j = 0; j < ref.size(); ++j) {
+    if (!ref.hasDepth(j)) continue;
+    ref_rows.push_back(static_cast<int>(j));
+    ref_descriptors.push_back(binaryDescriptorRow(ref.descriptors, static_cast<int>(j)));
+  }
+  if (ref_rows.size() < 3) return false;
+
+  // Nearest neighbour with a ratio test; each reference feature keeps its closest query feature.
+  std::vector<int> best_query(ref.size(), -1);
+  std::vector<int> best_query_distance(ref.size(), std::numeric_limits<int>::max());
+  for (std::size_t i = 0; i < query.size(); ++i) {
+    if (!query.hasDepth(i)) continue;
+    const BinaryDescriptor d = binaryDescriptorRow(query.descriptors, static_cast<int>(i));
+    int best = -1;
+    int best_distance = 257;
+    int second_distance = 257;
+    for (std::size_t k = 0; k < ref_descriptors.size(); ++k) {
+      const int distance = hammingDistance(d, ref_descriptors[k]);
+      if (distance < best_distance) {
+        second_distance = best_distance;
+        best_distance = distance;
+        best = ref_rows[k];
+      } else if (distance < second_distance) {
+        second_distance = distance;
+      }
+    }
+    if (best < 0 || best_distance > config_.loop_max_descriptor_distance ||
+        best_distance >= config_.loop_match_ratio * second_distance) {
+      continue;
+    }
+    if (best_distance < best_query_distance[static_cast<std::size_t>(best)]) {
+      best_query_distance[static_cast<std::size_t>(best)] = best_distance;
+      best_query[static_cast<std::size_t>(best)] = static_cast<int>(i);
+    }
+  }
+  std::vector<Correspondence> matches;
+  for (std::size_t j = 0; j < ref.size(); ++j) {
+    const int i = best_query[j];
+    if (i < 0) continue;
+    Correspondence c;
+    c.point_ref = ref.points[j];
+    c.pixel_curr = query.pixels[static_cast<std::size_t>(i)];
+    c.depth_curr_m = query.points[static_cast<std::size_t>(i)].z();
+    c.pixel_sigma_px = query.scale.size() == query.size()
+                           ? static_cast<double>(query.scale[static_cast<std::size_t>(i)])
+                           : 1.0;
+    c.ref_index = static_cast<int>(j);
+    c.curr_index = i;
+    matches.push_back(c);
+  }
+  detection.num_matches = static_cast<int>(matches.size());
+  if (detection.num_matches < config_.loop_min_inliers) return false;
+
+  const RansacResult ransac = ransacRigid(matches, intrinsics, config_.loop_inlier_threshold_px,
+                                          config_.loop_ransac_iterations, rng_);
+  if (!ransac.success || ransac.num_inliers < config_.loop_min_inliers) return false;
+  const RefinementResult refined =
+      refinePose(matches, ransac.inliers, intrinsics, ransac.T_ref_curr, RefinementOptions());
+  if (!refined.success) return false;
+  int inliers = 0;
+  for (const Correspondence& c : matches) {
+    if (reprojectionErrorPx(c, intrinsics, refined.T_ref_curr) <
+        config_.loop_inlier_threshold_px * c.pixel_sigma_px) {
+      ++inliers;
+    }
+  }
+  detection.num_inliers = inliers;
+  if (inliers < config_.loop_min_inliers) return false;
+  detection.T_match_query = refined.T_ref_curr;
+  Matrix6d covariance = refined.covariance;
+  for (int k = 0; k < 3; ++k) covariance(k, k) += kMinSigmaM * kMinSigmaM;
+  for (int k = 3; k < 6; ++k) covariance(k, k) += kMinSigmaRad * kMinSigmaRad;
+  detection.information = covariance.inverse();
+  detection.information = 0.5 * (detection.information + detection.information.transpose());
+  detection.match_id = e.id;
+  return true;
+}
+
+LoopDetection LoopDetector::processKeyframe(const Keyframe& keyframe) {
+  const auto start = std::chrono::steady_clock::now();
+  LoopDetection detection;
+  detection.query_id = keyframe.id;
+  const auto done = [&]() {
+    detection.time_ms = std::chrono::duration<double, std::milli>(
+                            std::chrono::steady_clock::now() - start)
+                            .count();
+    return detection;
+  };
+  if (!hasBinaryDescriptors(keyframe.features) || vocabulary_ == nullptr ||
+      vocabulary_->empty()) {
+    detection.status = LoopStatus::kUnsupportedDescriptors;
+    groups_.clear();
+    return done();
+  }
+  const BowVector bow = vocabulary_->transform(keyframe.features.descriptors);
+
+  const std::size_t excluded =
+      std::min(entries_.size(), static_cast<std::size_t>(config_.loop_exclude_recent));
+  const std::size_t num_searchable = entries_.size() - excluded;
+  // A candidate must look at least a fraction as similar as the previous keyframe does (which
+  // normally sees the same place): the threshold adapts to how distinctive the view is.
+  double min_score = config_.loop_min_score;
+  if (!entries_.empty()) {
+    min_score = std::max(min_score, config_.loop_min_score_ratio * bowScore(bow, entries_.back().bow));
+  }
+  std::vector<Candidate> candidates =
+      num_searchable > 0 ? retrieve(bow, num_searchable, min_score) : std::vector<Candidate>();
+  detection.num_candidates = static_cast<int>(candidates.size());
+  if (candidates.size() > static_cast<std::size_t>(config_.loop_max_candidates)) {
+    candidates.resize(static_cast<std::size_t>(config_.loop_max_candidates));
+  }
+
+  double path_length_m = 0.0;
+  if (!entries_.empty()) {
+    path_length_m = entries_.back().path_length_m +
+                    (keyframe.T_world_camera.translation() -
+                     entries_.back().T_world_camera.translation())
+                        .norm();
+  }
+
+  // Verify the candidates; each verified one joins (or starts) a consistency group.
+  std::vector<Group> new_groups;
+  LoopDetection best;
+  bool have_best = false;
+  bool odometry_rejected = false;
+  for (const Candidate& candidate : candidates) {
+    LoopDetection attempt = detection;
+    attempt.score = candidate.score;
+    const Entry& entry = entries_[static_cast<std::size_t>(candidate.entry)];
+    if (!verify(keyframe.features, keyframe.intrinsics, entry, attempt)) {
+      if (!have_best && attempt.num_inliers > best.num_inliers) best = attempt;
+      continue;
+    }
+    if (config_.loop_check_odometry && entry.segment == keyframe.segment) {
+      const SE3 T_odometry = entry.T_world_camera.inverse() * keyframe.T_world_camera;
+      const double discrepancy_m =
+          (T_odometry.translation() - attempt.T_match_query.translation()).norm();
+      const double allowed_m = config_.loop_max_drift_m +
+                               config_.loop_max_drift_ratio * (path_length_m - entry.path_length_m);
+      if (discrepancy_m > allowed_m) {
+        odometry_rejected = true;
+        continue;
+      }
+    }
+    int count = 1;
+    for (const Group& group : groups_) {
+      if (std::abs(group.match_id - attempt.match_id) <= config_.loop_consistency_window) {
+        count = std::max(count, group.count + 1);
+      }
+    }
+    attempt.consistency = count;
+    new_groups.push_back({attempt.match_id, count});
+    // Prefer the most consistent place, then the most inliers.
+    if (!have_best || attempt.consistency > best.consistency ||
+        (attempt.consistency == best.consistency && attempt.num_inliers > best.num_inliers)) {
+      best = attempt;
+      have_best = true;
+    }
+  }
+  groups_ = std::move(new_groups);
+
+  if (have_best) {
+    detection = best;
+    detection.status = best.consistency >= config_.loop_consistency
+                           ? LoopStatus::kLoopFound
+                           : LoopStatus::kAwaitingConsistency;
+  } else {
+    detection.status = candidates.empty()  ? LoopStatus::kNoCandidate
+                       : odometry_rejected ? LoopStatus::kOdometryRejected
+                                           : LoopStatus::kGeometryRejected;
+    detection.num_matches = best.num_matches;
+    detection.num_inliers = best.num_inliers;
+  }
+
+  const int entry = static_cast<int>(entries_.size());
+  entries_.push_back({keyframe.id, keyframe.segment, keyframe.T_world_camera, path_length_m, bow,
+                      keyframe.features});
+  for (const auto& [word, weight] : bow) inverted_[word].emplace_back(entry, weight);
+  return done();
+}
+
+LoopDetection LoopDetector::query(const FeatureSet& features, const CameraIntrinsics& intrinsics) {
+  const auto start = std::chrono::steady_clock::now();
+  LoopDetection detection;
+  if (!hasBinaryDescriptors(features) || vocabulary_ == nullptr || vocabulary_->empty()) {
+    detection.status = LoopStatus::kUnsupportedDescriptors;
+    return detection;
+  }
+  const BowVector bow = vocabulary_->transform(features.descriptors);
+  std::vector<Candidate> candidates = retrieve(bow, entries_.size(), config_.loop_min_score);
+  detection.num_candidates = static_cast<int>(candidates.size());
+  if (candidates.size() > static_cast<std::size_t>(config_.loop_max_candidates)) {
+    candidates.resize(static_cast<std::size_t>(config_.loop_max_candidates));
+  }
+  detection.status =
+      candidates.empty() ? LoopStatus::kNoCandidate : LoopStatus::kGeometryRejected;
+  for (const Candidate& candidate : candidates) {
+    LoopDetection attempt = detection;
+    attempt.score = candidate.score;
+    if (verify(features, intrinsics, entries_[static_cast<std::size_t>(candidate.entry)],
+               attempt) &&
+        (detection.match_id < 0 || attempt.num_inliers > detection.num_inliers)) {
+      detection = attempt;
+      detection.status = LoopStatus::kLoopFound;
+    }
+  }
+  detection.time_ms =
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+  return detection;
+}
+
+}  // namespace slamd

@@ -1,0 +1,170 @@
+// Place recognition on slamd's synthetic worlds: keyframes are rendered along the ground-truth
+// trajectory (every kKeyframeStep frames) with ORB features; the vocabulary is trained on a
+// different scene (the room) so that nothing about the corridors leaks into it.
+
+#include "slamd/backend/loop_detector.hpp"
+
+#include <cmath>
+#include <cstdio>
+#include <random>
+#include <sstream>
+
+#include <gtest/gtest.h>
+#include <opencv2/imgproc.hpp>
+
+#include "slamd/synth/synthetic_source.hpp"
+
+namespace slamd {
+namespace {
+
+constexpr int kKeyframeStep = 12;  // frames between keyframes (0.32 m at 0.8 m/s, 30 Hz)
+
+struct RenderedKeyframes {
+  std::vector<KeyframePtr> keyframes;
+  std::vector<SE3, Eigen::aligned_allocator<SE3>> truth;  ///< T_world_camera per keyframe
+};
+
+RenderedKeyframes renderKeyframes(const std::string& scene, int step, int max_keyframes) {
+  cv::setNumThreads(1);
+  Config config = Config::fromFile(std::string(SLAMD_SOURCE_DIR) + "/config/synthetic.yaml");
+  SyntheticSource source(scene, SyntheticConfig::load(config));
+  const Trajectory truth = *source.groundTruth();
+  TrackingConfig tracking;
+  auto extractor = makeFeatureExtractor(tracking);
+  // Keyframe poses as odometry would give them: the true steps with 2% translation noise and
+  // 0.3 degree rotation noise per keyframe (drift), seeded.
+  std::mt19937 rng(7);
+  std::normal_distribution<double> noise(0.0, 1.0);
+  SE3 T_world_odometry = SE3::Identity();
+  SE3 T_world_prev_true = SE3::Identity();
+  RenderedKeyframes out;
+  for (int index = 0; index < source.frameCount() &&
+                      static_cast<int>(out.keyframes.size()) < max_keyframes;
+       index += step) {
+    const RgbdFramePtr frame = source.renderFrame(index);
+    auto keyframe = std::make_shared<Keyframe>();
+    keyframe->id = static_cast<std::int64_t>(out.keyframes.size());
+    keyframe->intrinsics = frame->intrinsics;
+    const SE3 T_world_true = truth[static_cast<std::size_t>(index)].T_world_camera;
+    if (out.keyframes.empty()) {
+      T_world_odometry = T_world_true;
+    } else {
+      const SE3 step_true = T_world_prev_true.inverse() * T_world_true;
+      Vector6d xi;
+      const double step_m = step_true.translation().norm();
+      for (int k = 0; k < 3; ++k) xi(k) = 0.02 * step_m * noise(rng);
+      for (int k = 3; k < 6; ++k) xi(k) = 0.3 * M_PI / 180.0 * noise(rng);
+      T_world_odometry = T_world_odometry * step_true * expSE3(xi);
+    }
+    T_world_prev_true = T_world_true;
+    keyframe->T_world_camera = T_world_odometry;
+    cv::Mat gray = frame->gray;
+    if (gray.empty()) cv::cvtColor(frame->color_bgr, gray, cv::COLOR_BGR2GRAY);
+    extractor->extract(gray, keyframe->features);
+    attachGeometry(frame->depth_m, frame->intrinsics, tracking, keyframe->features);
+    out.keyframes.push_back(keyframe);
+    out.truth.push_back(T_world_true);
+  }
+  return out;
+}
+
+std::shared_ptr<const Vocabulary> roomVocabulary() {
+  static const std::shared_ptr<const Vocabulary> vocabulary = [] {
+    const RenderedKeyframes room = renderKeyframes("room", 45, 20);
+    std::vector<cv::Mat> descriptors;
+    for (const KeyframePtr& kf : room.keyframes) descriptors.push_back(kf->features.descriptors);
+    const BackendConfig config;
+    return std::make_shared<const Vocabulary>(Vocabulary::train(
+        descriptors, config.vocabulary_branching, config.vocabulary_depth, 42));
+  }();
+  return vocabulary;
+}
+
+struct DetectionRun {
+  std::vector<LoopDetection> loops;
+  int keyframes = 0;
+  int odometry_rejected = 0;
+  double max_time_ms = 0.0;
+  double total_time_ms = 0.0;
+};
+
+DetectionRun detectLoops(const RenderedKeyframes& world) {
+  LoopDetector detector(BackendConfig(), roomVocabulary());
+  DetectionRun run;
+  for (const KeyframePtr& kf : world.keyframes) {
+    const LoopDetection d = detector.processKeyframe(*kf);
+    ++run.keyframes;
+    run.max_time_ms = std::max(run.max_time_ms, d.time_ms);
+    run.total_time_ms += d.time_ms;
+    if (d.status == LoopStatus::kLoopFound) run.loops.push_back(d);
+    if (d.status == LoopStatus::kOdometryRejected) ++run.odometry_rejected;
+  }
+  return run;
+}
+
+TEST(Vocabulary, TrainsWordsAndScoresIdenticalImagesAsOne) {
+  const auto vocabulary = roomVocabulary();
+  ASSERT_FALSE(vocabulary->empty());
+  EXPECT_GT(vocabulary->numWords(), 100);
+  EXPECT_LE(vocabulary->numWords(), 512);
+  const RenderedKeyframes room = renderKeyframes("room", 200, 3);
+  const BowVector a = vocabulary->transform(room.keyframes[0]->features.descriptors);
+  const BowVector b = vocabulary->transform(room.keyframes[2]->features.descriptors);
+  EXPECT_NEAR(bowScore(a, a), 1.0, 1e-12);
+  EXPECT_LT(bowScore(a, b), 0.5);
+  // Serialisation round trip gives the same words.
+  std::stringstream buffer;
+  vocabulary->write(buffer);
+  Vocabulary copy;
+  ASSERT_TRUE(copy.read(buffer));
+  const BowVector c = copy.transform(room.keyframes[0]->features.descriptors);
+  EXPECT_NEAR(bowScore(a, c), 1.0, 1e-12);
+  std::stringstream garbage("not a vocabulary");
+  EXPECT_FALSE(copy.read(garbage));
+}
+
+TEST(LoopDetector, FindsTheRevisitOnTheRingCorridor) {
+  const RenderedKeyframes world = renderKeyframes("corridor_loop", kKeyframeStep, 1000);
+  const DetectionRun run = detectLoops(world);
+  std::printf("corridor_loop: %d keyframes, %zu loops, detection %.1f ms mean, %.1f ms max\n",
+              run.keyframes, run.loops.size(), run.total_time_ms / run.keyframes,
+              run.max_time_ms);
+  ASSERT_FALSE(run.loops.empty());
+  const int n = run.keyframes;
+  bool revisit = false;
+  for (const LoopDetection& d : run.loops) {
+    const SE3 T_true = world.truth[static_cast<std::size_t>(d.match_id)].inverse() *
+                       world.truth[static_cast<std::size_t>(d.query_id)];
+    const SE3 error = T_true.inverse() * d.T_match_query;
+    std::printf("  loop %ld -> %ld: score %.3f, %d/%d inliers, consistency %d, error %.3f m "
+                "%.2f deg\n",
+                static_cast<long>(d.query_id), static_cast<long>(d.match_id), d.score,
+                d.num_inliers, d.num_matches, d.consistency, error.translation().norm(),
+                rotationAngleRad(error.linear()) * 180.0 / M_PI);
+    // Every accepted loop is a true one: the measured relative pose matches the ground truth.
+    EXPECT_LT(error.translation().norm(), 0.05);
+    EXPECT_LT(rotationAngleRad(error.linear()) * 180.0 / M_PI, 1.0);
+    if (d.query_id >= n * 85 / 100 && d.match_id <= n * 15 / 100) revisit = true;
+  }
+  EXPECT_TRUE(revisit) << "no loop from the end of the lap back to its start";
+}
+
+TEST(LoopDetector, FindsNoLoopOnTheStraightCorridor) {
+  const RenderedKeyframes world = renderKeyframes("corridor", kKeyframeStep, 1000);
+  const DetectionRun run = detectLoops(world);
+  std::printf("corridor: %d keyframes, %zu loops, %d verified places rejected by odometry\n",
+              run.keyframes, run.loops.size(), run.odometry_rejected);
+  EXPECT_GT(run.keyframes, 50);
+  EXPECT_TRUE(run.loops.empty());
+}
+
+TEST(LoopDetector, RejectsNonBinaryDescriptors) {
+  LoopDetector detector(BackendConfig(), roomVocabulary());
+  Keyframe keyframe;
+  keyframe.features.descriptors = cv::Mat(10, 128, CV_32F, cv::Scalar(0));
+  EXPECT_EQ(detector.processKeyframe(keyframe).status, LoopStatus::kUnsupportedDescriptors);
+  EXPECT_EQ(detector.size(), 0u);
+}
+
+}  // namespace
+}  // namespace slamd
