@@ -26,6 +26,11 @@ TrackingConfig TrackingConfig::load(Config& config) {
   c.outlier_rejection = rejection == "ransac"   ? OutlierRejection::kRansac
                         : rejection == "clique" ? OutlierRejection::kClique
                                                 : OutlierRejection::kAuto;
+  const std::string prior =
+      config.getChoice("tracking.rotation_prior", "auto", {"auto", "on", "off"});
+  c.rotation_prior = prior == "on"    ? Switch::kOn
+                     : prior == "off" ? Switch::kOff
+                                      : Switch::kAuto;
   c.max_features = config.getInt("tracking.max_features", c.max_features, 50, 10000);
   c.grid_cols = config.getInt("tracking.grid_cols", c.grid_cols, 1, 64);
   c.grid_rows = config.getInt("tracking.grid_rows", c.grid_rows, 1, 64);

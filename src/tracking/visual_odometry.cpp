@@ -574,7 +574,7 @@ OdometryResult VisualOdometry::process(const RgbdFrame& frame, const RgbdFramePt
   curr.features->gray = frame_ptr && gray.data == frame.gray.data ? gray : gray.clone();
   curr.buildGrid();
   cv::Mat small;
-  if (config_.frontend == FrontEndType::kFovis) {
+  if (config_.useRotationPrior()) {
     cv::Mat tmp = gray;
     while (tmp.cols > 100) {
       cv::Mat down;
@@ -625,7 +625,7 @@ OdometryResult VisualOdometry::process(const RgbdFrame& frame, const RgbdFramePt
 
   // Motion prior: constant velocity (FOVIS: rotation from image alignment).
   SE3 motion_prior = have_velocity_ ? velocity_prev_curr_ : SE3::Identity();
-  if (config_.frontend == FrontEndType::kFovis) {
+  if (config_.useRotationPrior()) {
     const SE3 rotation = alignRotation(small, K);
     motion_prior.linear() = rotation.linear();
   }

@@ -73,6 +73,15 @@ struct TrackingConfig {
            (outlier_rejection == OutlierRejection::kAuto && frontend == FrontEndType::kFovis);
   }
 
+  /// tracking.rotation_prior (choice auto|on|off, default auto): predict the rotation from image
+  /// alignment of 80x60 blurred images (FOVIS) instead of constant velocity; auto = fovis only.
+  enum class Switch { kAuto, kOn, kOff };
+  Switch rotation_prior = Switch::kAuto;
+  bool useRotationPrior() const {
+    return rotation_prior == Switch::kOn ||
+           (rotation_prior == Switch::kAuto && frontend == FrontEndType::kFovis);
+  }
+
   // --- Motion estimation ----------------------------------------------------------------------
   /// tracking.ransac_iterations (int, default 200, range [1, 100000]): upper bound on RANSAC
   /// hypotheses (fewer are drawn when the inlier ratio is high, at 99.9% confidence).
