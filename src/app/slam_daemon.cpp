@@ -4,6 +4,8 @@
 #include <chrono>
 #include <mutex>
 
+#include <opencv2/core.hpp>
+
 #include "slamd/app/daemon_config.hpp"
 #include "slamd/app/daemon_messages.hpp"
 #include "slamd/app/pose_estimator.hpp"
@@ -184,6 +186,7 @@ void SlamDaemon::Impl::publishStatus(LcmBus& bus, StatusBuilder& builder, Pipeli
 
 int SlamDaemon::Impl::run(ShutdownSignals& signals) {
   const std::int64_t start_ns = steadyNowNs();
+  cv::setNumThreads(daemon.opencv_threads);
   try {
     source->open();
   } catch (const SourceError& e) {

@@ -50,6 +50,10 @@ struct DaemonConfig {
   /// daemon.map_save_path (path, default "slamd_map.bt"): where SAVE_MAP writes when the command
   /// names no file and no --map-out was given.
   std::string map_save_path = "slamd_map.bt";
+  /// daemon.opencv_threads (int, default 0, 0..64): OpenCV's own worker threads. 0 runs every
+  /// OpenCV call on the stage thread that makes it: the pipeline already keeps the cores busy
+  /// with one thread per stage, and a hidden pool would compete with them for the same cores.
+  int opencv_threads = 0;
   /// daemon.world_frame / daemon.camera_frame (strings): frame names in published poses.
   std::string world_frame = "world";
   std::string camera_frame = "camera";
