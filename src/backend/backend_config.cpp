@@ -28,6 +28,10 @@ BackendConfig BackendConfig::load(Config& config) {
   c.relative_cost_tolerance = config.getDouble("backend.relative_cost_tolerance",
                                                c.relative_cost_tolerance, 0.0, 1.0);
   c.step_tolerance = config.getDouble("backend.step_tolerance", c.step_tolerance, 0.0, 1.0);
+  c.odometry_sigma_ratio =
+      config.getDouble("backend.odometry_sigma_ratio", c.odometry_sigma_ratio, 1e-4, 1.0);
+  c.odometry_sigma_rad =
+      config.getDouble("backend.odometry_sigma_rad", c.odometry_sigma_rad, 1e-5, 1.0);
   c.vocabulary_branching =
       config.getInt("backend.vocabulary_branching", c.vocabulary_branching, 2, 32);
   c.vocabulary_depth = config.getInt("backend.vocabulary_depth", c.vocabulary_depth, 1, 6);

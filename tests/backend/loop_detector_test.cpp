@@ -4,6 +4,8 @@
 
 #include "slamd/backend/loop_detector.hpp"
 
+#include "slamd/backend/backend.hpp"
+
 #include <cmath>
 #include <cstdio>
 #include <random>
@@ -80,6 +82,12 @@ std::shared_ptr<const Vocabulary> roomVocabulary() {
   return vocabulary;
 }
 
+// The ring corridor's keyframes, rendered once for the tests that need them.
+const RenderedKeyframes& ringKeyframes() {
+  static const RenderedKeyframes world = renderKeyframes("corridor_loop", kKeyframeStep, 1000);
+  return world;
+}
+
 struct DetectionRun {
   std::vector<LoopDetection> loops;
   int keyframes = 0;
@@ -124,7 +132,7 @@ TEST(Vocabulary, TrainsWordsAndScoresIdenticalImagesAsOne) {
 }
 
 TEST(LoopDetector, FindsTheRevisitOnTheRingCorridor) {
-  const RenderedKeyframes world = renderKeyframes("corridor_loop", kKeyframeStep, 1000);
+  const RenderedKeyframes& world = ringKeyframes();
   const DetectionRun run = detectLoops(world);
   std::printf("corridor_loop: %d keyframes, %zu loops, detection %.1f ms mean, %.1f ms max\n",
               run.keyframes, run.loops.size(), run.total_time_ms / run.keyframes,
@@ -156,6 +164,44 @@ TEST(LoopDetector, FindsNoLoopOnTheStraightCorridor) {
               run.keyframes, run.loops.size(), run.odometry_rejected);
   EXPECT_GT(run.keyframes, 50);
   EXPECT_TRUE(run.loops.empty());
+}
+
+TEST(Backend, ClosingTheRingLoopPullsTheDriftedKeyframesBack) {
+  const RenderedKeyframes& world = ringKeyframes();
+  Backend backend(BackendConfig(), roomVocabulary());
+  int optimisations = 0;
+  for (const KeyframePtr& kf : world.keyframes) {
+    const BackendUpdate u = backend.addKeyframe(kf);
+    if (u.optimized) {
+      ++optimisations;
+      EXPECT_EQ(u.corrected_poses.size(), backend.graph().numNodes());
+      EXPECT_NE(u.optimization.status, OptimizationStatus::kSolverFailure);
+      std::printf("optimised %d nodes, %d edges: %d iterations, %.2f ms\n",
+                  u.optimization.num_nodes, u.optimization.num_edges, u.optimization.iterations,
+                  u.optimization.time_ms);
+    }
+  }
+  double before = 0.0;
+  double after = 0.0;
+  double end_before = 0.0;
+  double end_after = 0.0;
+  for (std::size_t k = 0; k < world.keyframes.size(); ++k) {
+    const Eigen::Vector3d p_true = world.truth[k].translation();
+    const double e_before = (world.keyframes[k]->T_world_camera.translation() - p_true).norm();
+    const double e_after = (backend.pose(world.keyframes[k]->id).translation() - p_true).norm();
+    before += e_before * e_before;
+    after += e_after * e_after;
+    end_before = e_before;
+    end_after = e_after;
+  }
+  before = std::sqrt(before / static_cast<double>(world.keyframes.size()));
+  after = std::sqrt(after / static_cast<double>(world.keyframes.size()));
+  std::printf("ring keyframes: RMS position error %.3f m -> %.3f m, last keyframe %.3f m -> "
+              "%.3f m\n", before, after, end_before, end_after);
+  EXPECT_GE(backend.numLoops(), 1);
+  EXPECT_EQ(optimisations, backend.numLoops());
+  EXPECT_LT(end_after, 0.1);
+  EXPECT_LT(after, before / 2.0);
 }
 
 TEST(LoopDetector, RejectsNonBinaryDescriptors) {

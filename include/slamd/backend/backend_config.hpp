@@ -44,6 +44,14 @@ struct BackendConfig {
   /// radians): stop when the update is this small.
   double step_tolerance = 1e-9;
 
+  /// backend.odometry_sigma_ratio (double, default 0.02, range [1e-4, 1], metres per metre):
+  /// standard deviation of an odometry edge's translation per metre between the keyframes
+  /// (plus 5 mm), per axis.
+  double odometry_sigma_ratio = 0.02;
+  /// backend.odometry_sigma_rad (double, default 0.005, range [1e-5, 1], radians): standard
+  /// deviation of an odometry edge's rotation, per axis.
+  double odometry_sigma_rad = 0.005;
+
   // --- Place recognition ----------------------------------------------------------------------
   /// backend.vocabulary_branching (int, default 8, range [2, 32]): children per vocabulary node.
   int vocabulary_branching = 8;
