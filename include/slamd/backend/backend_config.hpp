@@ -37,12 +37,12 @@ struct BackendConfig {
   /// backend.initial_lambda (double, default 1e-4, range [1e-12, 1e6], unitless): initial LM
   /// damping, relative to the diagonal of the normal equations.
   double initial_lambda = 1e-4;
-  /// backend.relative_cost_tolerance (double, default 1e-9, range [0, 1]): stop when an accepted
+  /// backend.relative_cost_tolerance (double, default 1e-6, range [0, 1]): stop when an accepted
   /// step lowers the cost by less than this fraction.
-  double relative_cost_tolerance = 1e-9;
-  /// backend.step_tolerance (double, default 1e-9, range [0, 1], unit: tangent norm, metres /
+  double relative_cost_tolerance = 1e-6;
+  /// backend.step_tolerance (double, default 1e-6, range [0, 1], unit: tangent norm, metres /
   /// radians): stop when the update is this small.
-  double step_tolerance = 1e-9;
+  double step_tolerance = 1e-6;
 
   /// backend.odometry_sigma_ratio (double, default 0.02, range [1e-4, 1], metres per metre):
   /// standard deviation of an odometry edge's translation per metre between the keyframes

@@ -55,8 +55,8 @@ struct PoseGraphOptions {
   bool robust_odometry_edges = false;
   int max_iterations = 30;
   double initial_lambda = 1e-4;
-  double relative_cost_tolerance = 1e-9;
-  double step_tolerance = 1e-9;
+  double relative_cost_tolerance = 1e-6;
+  double step_tolerance = 1e-6;
 
   static PoseGraphOptions fromConfig(const BackendConfig& config);
 };

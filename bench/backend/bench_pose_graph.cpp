@@ -1,0 +1,79 @@
+// bench_pose_graph: pose-graph optimisation time (Levenberg-Marquardt on CHOLMOD) against graph
+// size: a ring of N keyframes with drifting odometry, closed by 4 loop edges plus one loop edge
+// every 50 keyframes to a keyframe 40 back (re-visits), seeded.
+//
+//   build/bin/bench_pose_graph --benchmark_counters_tabular=true
+
+#include <cmath>
+#include <random>
+
+#include <benchmark/benchmark.h>
+
+#include "slamd/backend/pose_graph.hpp"
+
+namespace slamd {
+namespace {
+
+Vector6d noise(std::mt19937& rng, double sigma_m, double sigma_rad) {
+  std::normal_distribution<double> n(0.0, 1.0);
+  Vector6d xi;
+  for (int k = 0; k < 3; ++k) xi(k) = sigma_m * n(rng);
+  for (int k = 3; k < 6; ++k) xi(k) = sigma_rad * n(rng);
+  return xi;
+}
+
+PoseGraph makeGraph(int n) {
+  std::mt19937 rng(42);
+  const double radius_m = 0.05 * n / (2.0 * M_PI);  // 5 cm between keyframes
+  std::vector<SE3, Eigen::aligned_allocator<SE3>> truth;
+  for (int k = 0; k < n; ++k) {
+    const double a = 2.0 * M_PI * k / n;
+    SE3 T = SE3::Identity();
+    T.translation() = Eigen::Vector3d(radius_m * std::cos(a), radius_m * std::sin(a), 0.0);
+    T.linear() = expSO3(Eigen::Vector3d(0.0, 0.0, a + M_PI / 2));
+    truth.push_back(T);
+  }
+  Vector6d information_diagonal;
+  information_diagonal << Eigen::Vector3d::Constant(1.0 / (0.01 * 0.01)),
+      Eigen::Vector3d::Constant(1.0 / (0.005 * 0.005));
+  const Matrix6d information = information_diagonal.asDiagonal();
+  PoseGraph graph;
+  SE3 T_est = truth[0];
+  graph.addNode(0, T_est);
+  for (int k = 1; k < n; ++k) {
+    const SE3 Z = truth[k - 1].inverse() * truth[k] * expSE3(noise(rng, 0.01, 0.005));
+    T_est = T_est * Z;
+    graph.addNode(k, T_est);
+    graph.addEdge({k - 1, k, Z, information, EdgeKind::kOdometry});
+  }
+  const auto loop = [&](int i, int j) {
+    graph.addEdge({i, j, truth[i].inverse() * truth[j] * expSE3(noise(rng, 0.01, 0.005)),
+                   information, EdgeKind::kLoop});
+  };
+  for (int k = 0; k < 4; ++k) loop(k, n - 1 - k);
+  for (int k = 50; k < n; k += 50) loop(k - 40, k);
+  return graph;
+}
+
+void BM_OptimizeRing(benchmark::State& state) {
+  const int n = static_cast<int>(state.range(0));
+  const PoseGraph initial = makeGraph(n);
+  PoseGraphResult result;
+  for (auto _ : state) {
+    PoseGraph graph = initial;
+    result = graph.optimize(PoseGraphOptions());
+    benchmark::DoNotOptimize(result.final_cost);
+  }
+  state.counters["nodes"] = n;
+  state.counters["edges"] = result.num_edges;
+  state.counters["iterations"] = result.iterations;
+  state.counters["converged"] = result.status == OptimizationStatus::kConverged ? 1 : 0;
+  state.counters["cost_ratio"] = result.final_cost / result.initial_cost;
+  state.counters["ms_per_iteration"] = result.time_ms / std::max(1, result.iterations);
+}
+BENCHMARK(BM_OptimizeRing)->Arg(100)->Arg(300)->Arg(1000)->Arg(3000)->Unit(benchmark::kMillisecond);
+
+}  // namespace
+}  // namespace slamd
+
+BENCHMARK_MAIN();
