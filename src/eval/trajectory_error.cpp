@@ -1,5 +1,7 @@
 #include "slamd/eval/trajectory_error.hpp"
 
+#include "slamd/common/timestamp_association.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <map>
@@ -69,54 +71,25 @@ ErrorStatistics scaledStatistics(const ErrorStatistics& statistics, double facto
 std::vector<AssociatedPair> associateTimestamps(const std::vector<double>& first_s,
                                                 const std::vector<double>& second_s,
                                                 const AssociationOptions& options) {
-  // Unique keys, the last index winning (the scripts build a dict), sorted by value.
+  // The scripts read each file into a dict: a repeated timestamp keeps its last line.
   auto uniqueKeys = [](const std::vector<double>& stamps) {
     std::map<double, std::size_t> last_index;
     for (std::size_t i = 0; i < stamps.size(); ++i) last_index[stamps[i]] = i;
-    return std::vector<std::pair<double, std::size_t>>(last_index.begin(), last_index.end());
-  };
-  const auto first = uniqueKeys(first_s);
-  const auto second = uniqueKeys(second_s);
-
-  // Candidates: every pair with |a - (b + offset)| < max_difference, found through a window
-  // search on the sorted second list (a slightly wider window, then the script's exact test).
-  struct Candidate {
-    double difference;
-    std::size_t first_rank;
-    std::size_t second_rank;
-  };
-  std::vector<Candidate> candidates;
-  const double margin = options.max_difference_s + 1e-3;
-  for (std::size_t i = 0; i < first.size(); ++i) {
-    const double a = first[i].first;
-    auto it = std::lower_bound(
-        second.begin(), second.end(), a - options.offset_s - margin,
-        [](const std::pair<double, std::size_t>& entry, double value) { return entry.first < value; });
-    for (; it != second.end() && it->first <= a - options.offset_s + margin; ++it) {
-      const double difference = std::abs(a - (it->first + options.offset_s));
-      if (difference < options.max_difference_s) {
-        candidates.push_back({difference, i, static_cast<std::size_t>(it - second.begin())});
-      }
+    std::vector<double> keys;
+    std::vector<std::size_t> indices;
+    for (const auto& [stamp, index] : last_index) {
+      keys.push_back(stamp);
+      indices.push_back(index);
     }
-  }
-  // Ranks order like the timestamps, so (difference, rank, rank) sorts like the script's tuples.
-  std::sort(candidates.begin(), candidates.end(), [](const Candidate& x, const Candidate& y) {
-    return std::tie(x.difference, x.first_rank, x.second_rank) <
-           std::tie(y.difference, y.first_rank, y.second_rank);
-  });
-  std::vector<bool> first_used(first.size(), false);
-  std::vector<bool> second_used(second.size(), false);
-  std::vector<std::pair<std::size_t, std::size_t>> ranked;
-  for (const auto& c : candidates) {
-    if (first_used[c.first_rank] || second_used[c.second_rank]) continue;
-    first_used[c.first_rank] = true;
-    second_used[c.second_rank] = true;
-    ranked.emplace_back(c.first_rank, c.second_rank);
-  }
-  std::sort(ranked.begin(), ranked.end());
+    return std::make_pair(keys, indices);
+  };
+  const auto [first_keys, first_indices] = uniqueKeys(first_s);
+  const auto [second_keys, second_indices] = uniqueKeys(second_s);
   std::vector<AssociatedPair> pairs;
-  pairs.reserve(ranked.size());
-  for (const auto& [i, j] : ranked) pairs.push_back({first[i].second, second[j].second});
+  for (const auto& [i, j] : slamd::associateTimestamps(first_keys, second_keys,
+                                                       options.max_difference_s, options.offset_s)) {
+    pairs.push_back({first_indices[i], second_indices[j]});
+  }
   return pairs;
 }
 

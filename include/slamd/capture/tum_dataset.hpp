@@ -5,15 +5,15 @@
 // fields are separated by any mix of spaces, tabs and commas; lines with fewer than two fields
 // are ignored. Timestamps are seconds as double, exactly as written.
 //
-// associateTimestamps() reproduces associate.py: every pair (a, b) with
-// |a - (b + offset)| < max_difference is a candidate; candidates are taken in order of increasing
-// difference (ties by a, then b), each accepted when neither side is matched yet; the result is
-// sorted by the first timestamp.
+// Colour and depth are paired with associateTimestamps() (common/timestamp_association.hpp),
+// which reproduces associate.py.
 
 #include <cstddef>
 #include <string>
 #include <utility>
 #include <vector>
+
+#include "slamd/common/timestamp_association.hpp"
 
 namespace slamd {
 
@@ -54,9 +54,5 @@ TumFileList readTumFileList(const std::string& path);
 /// order is taken as depth first).
 TumAssociationList parseTumAssociations(const std::string& text, const std::string& source);
 
-/// Index pairs (into `first`, `second`) of the associated timestamps, sorted by first.
-std::vector<std::pair<std::size_t, std::size_t>> associateTimestamps(
-    const std::vector<double>& first_s, const std::vector<double>& second_s,
-    double max_difference_s = 0.02, double offset_s = 0.0);
 
 }  // namespace slamd
