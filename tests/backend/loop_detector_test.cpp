@@ -166,7 +166,34 @@ TEST(LoopDetector, FindsNoLoopOnTheStraightCorridor) {
   EXPECT_TRUE(run.loops.empty());
 }
 
-TEST(Backend, ClosingTheRingLoopPullsTheDriftedKeyframesBack) {
+// Relocalisation: a frame half-way between two keyframes is matched against the database.
+// (Part of the Backend test to render the ring once per test process.)
+void expectRelocalisation(const RenderedKeyframes& world, LoopDetector& detector) {
+  // A frame half-way between keyframes 40 and 41, as after tracking loss.
+  const int frame_index = 40 * kKeyframeStep + kKeyframeStep / 2;
+  Config config = Config::fromFile(std::string(SLAMD_SOURCE_DIR) + "/config/synthetic.yaml");
+  SyntheticSource source("corridor_loop", SyntheticConfig::load(config));
+  const RgbdFramePtr frame = source.renderFrame(frame_index);
+  TrackingConfig tracking;
+  FeatureSet features;
+  cv::Mat gray = frame->gray;
+  if (gray.empty()) cv::cvtColor(frame->color_bgr, gray, cv::COLOR_BGR2GRAY);
+  makeFeatureExtractor(tracking)->extract(gray, features);
+  attachGeometry(frame->depth_m, frame->intrinsics, tracking, features);
+  const LoopDetection d = detector.query(features, frame->intrinsics);
+  ASSERT_EQ(d.status, LoopStatus::kLoopFound) << loopStatusName(d.status);
+  EXPECT_LE(std::abs(d.match_id - 40), 2);
+  const SE3 T_true = world.truth[static_cast<std::size_t>(d.match_id)].inverse() *
+                     source.groundTruth()->at(static_cast<std::size_t>(frame_index)).T_world_camera;
+  const SE3 error = T_true.inverse() * d.T_match_query;
+  std::printf("relocalised against keyframe %ld: %d inliers, error %.3f m %.2f deg, %.1f ms\n",
+              static_cast<long>(d.match_id), d.num_inliers, error.translation().norm(),
+              rotationAngleRad(error.linear()) * 180.0 / M_PI, d.time_ms);
+  EXPECT_LT(error.translation().norm(), 0.05);
+  EXPECT_LT(rotationAngleRad(error.linear()) * 180.0 / M_PI, 1.0);
+}
+
+TEST(Backend, ClosingTheRingLoopPullsTheDriftedKeyframesBackAndRelocalises) {
   const RenderedKeyframes& world = ringKeyframes();
   Backend backend(BackendConfig(), roomVocabulary());
   int optimisations = 0;
@@ -202,6 +229,7 @@ TEST(Backend, ClosingTheRingLoopPullsTheDriftedKeyframesBack) {
   EXPECT_EQ(optimisations, backend.numLoops());
   EXPECT_LT(end_after, 0.1);
   EXPECT_LT(after, before / 2.0);
+  expectRelocalisation(world, backend.loopDetector());
 }
 
 TEST(LoopDetector, RejectsNonBinaryDescriptors) {
