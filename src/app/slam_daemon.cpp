@@ -330,6 +330,7 @@ int SlamDaemon::Impl::run(ShutdownSignals& signals) {
          live ? EdgePolicy::kDrainToNewest : EdgePolicy::kBackpressure},
         [&](EstimatedPacket packet) { runMappingStep(*bus, packet, mapping_reset_seen,
                                                      next_occupancy_count_ns); });
+    pipeline.setStageNice("mapping", daemon.mapping_nice);
   }
 
   StatusBuilder status_builder;
@@ -387,6 +388,14 @@ int SlamDaemon::Impl::run(ShutdownSignals& signals) {
   summary.end_to_end_p50_ms = latency.p50_ms;
   summary.end_to_end_p95_ms = latency.p95_ms;
   summary.end_to_end_p99_ms = latency.p99_ms;
+  for (const auto& stage : stats) {
+    std::uint64_t dropped = 0;
+    for (const auto& edge : stage.inputs) dropped += edge.dropped + edge.discarded;
+    SLAMD_LOG_INFO(kLog) << "stage " << stage.name << ": " << stage.processed << " processed, "
+                         << dropped << " dropped at its input, " << stage.errors
+                         << " errors; time per item p50 " << stage.latency.p50_ms << " ms, p95 "
+                         << stage.latency.p95_ms << " ms, p99 " << stage.latency.p99_ms << " ms";
+  }
   SLAMD_LOG_INFO(kLog) << "frames: " << summary.frames_captured << " captured, "
                        << summary.frames_tracked << " tracked, " << summary.poses_published
                        << " poses published; " << summary.drops << " dropped, " << summary.errors

@@ -97,9 +97,12 @@ FrameRead PacedSource::next(std::chrono::milliseconds timeout) {
       return FrameRead{FrameRead::Status::kTimeout, {}, {}};
     }
     std::this_thread::sleep_until(due);
-    FrameRead read{FrameRead::Status::kFrame, std::move(pending_), {}};
+    // Released now, as a camera would deliver it: that is its arrival time for latency purposes
+    // (the copy is shallow; images are shared).
+    auto released = std::make_shared<RgbdFrame>(*pending_);
+    released->received_steady_ns = steadyNowNs();
     pending_.reset();
-    return read;
+    return FrameRead{FrameRead::Status::kFrame, std::move(released), {}};
   }
 }
 

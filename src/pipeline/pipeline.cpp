@@ -1,5 +1,9 @@
 #include "slamd/pipeline/pipeline.hpp"
 
+#include <sys/resource.h>
+#include <sys/syscall.h>
+#include <unistd.h>
+
 #include "slamd/common/log.hpp"
 
 namespace slamd {
@@ -46,7 +50,17 @@ void Pipeline::start() {
   threads_.reserve(nodes_.size());
   for (auto& node : nodes_) {
     pipeline_detail::NodeBase* raw = node.get();
-    threads_.emplace_back([raw] { raw->run(); });
+    threads_.emplace_back([raw] {
+      if (raw->nice() != 0) {
+        // Linux applies setpriority(PRIO_PROCESS, tid) to one thread.
+        const auto tid = static_cast<id_t>(syscall(SYS_gettid));
+        if (setpriority(PRIO_PROCESS, tid, raw->nice()) != 0) {
+          SLAMD_LOG_WARN("pipeline") << "cannot set niceness " << raw->nice() << " of stage '"
+                                     << raw->name() << "'";
+        }
+      }
+      raw->run();
+    });
   }
 }
 
@@ -117,6 +131,17 @@ void Pipeline::joinAll() {
     SLAMD_LOG_DEBUG("pipeline") << "stage '" << nodes_[i]->name() << "' stopped";
   }
   joined_ = true;
+}
+
+void Pipeline::setStageNice(const std::string& name, int nice) {
+  checkBuilding();
+  for (auto& node : nodes_) {
+    if (node->name() == name) {
+      node->setNice(nice);
+      return;
+    }
+  }
+  throw std::invalid_argument("no stage named '" + name + "'");
 }
 
 std::vector<StageStats> Pipeline::stats() const {

@@ -27,9 +27,10 @@ struct DaemonConfig {
   /// daemon.heartbeat_period_s (double, default 0.2, 0.01..10, s): with no frame for this long the
   /// capture thread sends a heartbeat so later stages can serve commands.
   double heartbeat_period_s = 0.2;
-  /// daemon.tracking_queue (int, default 2, 1..1000): frames waiting for tracking. Live and
-  /// real-time sources drop the oldest when it is full; datasets played as fast as possible wait.
-  int tracking_queue = 2;
+  /// daemon.tracking_queue (int, default 1, 1..1000): frames waiting for tracking. Live and
+  /// real-time sources drop the oldest when it is full (1: tracking always gets the newest frame,
+  /// the lowest latency); datasets played as fast as possible wait.
+  int tracking_queue = 1;
   /// daemon.filter_queue (int, default 8, 1..1000): tracked frames waiting for the filter (never
   /// dropped).
   int filter_queue = 8;
@@ -50,6 +51,9 @@ struct DaemonConfig {
   /// daemon.map_save_path (path, default "slamd_map.bt"): where SAVE_MAP writes when the command
   /// names no file and no --map-out was given.
   std::string map_save_path = "slamd_map.bt";
+  /// daemon.mapping_nice (int, default 10, 0..19): niceness of the mapping thread. Mapping is off
+  /// the capture-to-pose path, so it gets the CPU the latency-critical stages leave.
+  int mapping_nice = 10;
   /// daemon.opencv_threads (int, default 0, 0..64): OpenCV's own worker threads. 0 runs every
   /// OpenCV call on the stage thread that makes it: the pipeline already keeps the cores busy
   /// with one thread per stage, and a hidden pool would compete with them for the same cores.

@@ -270,6 +270,10 @@ class NodeBase {
   virtual void discardInputs() {}
 
   bool finished() const { return finished_.load(std::memory_order_acquire); }
+  /// Scheduling niceness of this node's thread (0 = the process's; higher = yields CPU to the
+  /// others), applied when its thread starts.
+  void setNice(int nice) { nice_ = nice; }
+  int nice() const { return nice_; }
 
  protected:
   void markFinished() {
@@ -291,6 +295,7 @@ class NodeBase {
 
   std::string name_;
   RunControl* control_;
+  int nice_ = 0;
   std::atomic<bool> finished_{false};
   std::atomic<std::uint64_t> processed_{0};
   std::atomic<std::uint64_t> emitted_{0};
@@ -550,6 +555,11 @@ class Pipeline {
 
   /// Counters of every node in graph order (callable from any thread while running).
   std::vector<StageStats> stats() const;
+
+  /// Lowers (nice > 0) the CPU priority of one node's thread, for stages off the latency-critical
+  /// path (e.g. mapping) so they use what the critical path leaves. Call before start().
+  /// Throws std::invalid_argument for an unknown name.
+  void setStageNice(const std::string& name, int nice);
 
   bool running() const { return started_ && !joined_; }
 
