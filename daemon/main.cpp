@@ -23,6 +23,8 @@ int main(int argc, char** argv) {
   options.addOption("map-out", "FILE.bt", "write the map (.bt or .ot) at exit");
   options.addOption("groundtruth-out", "FILE",
                     "write the source's ground truth (TUM folders, synthetic worlds) at exit");
+  options.addOption("metrics-out", "FILE.json",
+                    "write run metrics (rates, drops, latency percentiles) as JSON at exit");
   if (!options.parse(argc, argv)) return options.exitCode();
 
   DaemonOverrides overrides;
@@ -31,6 +33,7 @@ int main(int argc, char** argv) {
   overrides.trajectory_out = options.value("trajectory-out");
   overrides.map_out = options.value("map-out");
   overrides.groundtruth_out = options.value("groundtruth-out");
+  overrides.metrics_out = options.value("metrics-out");
   std::unique_ptr<SlamDaemon> daemon;
   try {
     Config config = options.loadConfig();

@@ -14,6 +14,8 @@ PACKAGES=(
   libgtest-dev libgmock-dev libbenchmark-dev
   # integration tests: network namespaces (unshare, ip), octomap tools
   iproute2 util-linux octomap-tools
+  # benchmarks: peak memory and CPU time of each run
+  time
 )
 
 missing=()

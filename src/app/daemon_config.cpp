@@ -8,6 +8,7 @@ DaemonConfig DaemonConfig::load(Config& config) {
   c.trajectory_out = config.getString("daemon.trajectory_out", c.trajectory_out);
   c.map_out = config.getString("daemon.map_out", c.map_out);
   c.groundtruth_out = config.getString("daemon.groundtruth_out", c.groundtruth_out);
+  c.metrics_out = config.getString("daemon.metrics_out", c.metrics_out);
   c.status_period_s = config.getDouble("daemon.status_period_s", c.status_period_s, 0.05, 60.0);
   c.drain_deadline_s = config.getDouble("daemon.drain_deadline_s", c.drain_deadline_s, 0.0, 600.0);
   c.heartbeat_period_s =

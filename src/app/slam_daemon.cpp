@@ -2,6 +2,7 @@
 
 #include <atomic>
 #include <chrono>
+#include <fstream>
 #include <mutex>
 
 #include <opencv2/core.hpp>
@@ -20,6 +21,7 @@
 #include "slamd/comms/map_codec.hpp"
 #include "slamd/comms/pose_codec.hpp"
 #include "slamd/comms/status_codec.hpp"
+#include "slamd/eval/json_writer.hpp"
 #include "slamd/pipeline/pipeline.hpp"
 #include "slamd/mapping/mapper.hpp"
 #include "slamd/sources/create_frame_source.hpp"
@@ -83,6 +85,7 @@ struct SlamDaemon::Impl {
     if (!overrides.trajectory_out.empty()) daemon.trajectory_out = overrides.trajectory_out;
     if (!overrides.map_out.empty()) daemon.map_out = overrides.map_out;
     if (!overrides.groundtruth_out.empty()) daemon.groundtruth_out = overrides.groundtruth_out;
+    if (!overrides.metrics_out.empty()) daemon.metrics_out = overrides.metrics_out;
     if (!overrides.lcm_url.empty()) config.set("lcm.url", overrides.lcm_url);
     channels = ChannelConfig::load(config);
     tracking_config = TrackingConfig::load(config);
@@ -103,6 +106,7 @@ struct SlamDaemon::Impl {
                       std::int64_t& next_occupancy_count_ns);
   void serveMapRequest(LcmBus& bus, const MapRequest& request);
   void publishMapOutputs(LcmBus& bus, const MapperOutputs& outputs);
+  void writeMetrics(const std::vector<StageStats>& stats, const LatencySummary& end_to_end_latency);
 };
 
 SlamDaemon::SlamDaemon(Config& config, const DaemonOverrides& overrides)
@@ -403,7 +407,43 @@ int SlamDaemon::Impl::run(ShutdownSignals& signals) {
                        << summary.duration_s << " s; capture-to-pose latency p50 "
                        << latency.p50_ms << " ms, p95 " << latency.p95_ms << " ms, p99 "
                        << latency.p99_ms << " ms";
+  if (!daemon.metrics_out.empty()) writeMetrics(stats, latency);
   return writeOutputs();
+}
+
+void SlamDaemon::Impl::writeMetrics(const std::vector<StageStats>& stats,
+                                    const LatencySummary& end_to_end_latency) {
+  eval::JsonWriter json(true);
+  json.beginObject();
+  json.key("program").value("slamd");
+  json.key("source").value(daemon.source);
+  json.key("live").value(source->isLive());
+  json.key("frames_captured").value(static_cast<std::int64_t>(summary.frames_captured));
+  json.key("poses_published").value(static_cast<std::int64_t>(summary.poses_published));
+  json.key("frames_mapped").value(static_cast<std::int64_t>(summary.frames_mapped));
+  json.key("drops").value(static_cast<std::int64_t>(summary.drops));
+  json.key("errors").value(static_cast<std::int64_t>(summary.errors));
+  json.key("duration_s").value(summary.duration_s);
+  json.key("fps").value(summary.duration_s > 0
+                            ? static_cast<double>(summary.poses_published) / summary.duration_s
+                            : 0.0);
+  json.key("end_to_end_p50_ms").value(end_to_end_latency.p50_ms);
+  json.key("end_to_end_p95_ms").value(end_to_end_latency.p95_ms);
+  json.key("end_to_end_p99_ms").value(end_to_end_latency.p99_ms);
+  json.key("stages").beginObject();
+  for (const auto& stage : stats) {
+    json.key(stage.name).beginObject();
+    json.key("processed").value(static_cast<std::int64_t>(stage.processed));
+    json.key("p50_ms").value(stage.latency.p50_ms);
+    json.key("p95_ms").value(stage.latency.p95_ms);
+    json.key("p99_ms").value(stage.latency.p99_ms);
+    json.endObject();
+  }
+  json.endObject();
+  json.endObject();
+  std::ofstream out(daemon.metrics_out);
+  out << json.str() << "\n";
+  if (!out) SLAMD_LOG_ERROR(kLog) << "cannot write metrics to " << daemon.metrics_out;
 }
 
 void SlamDaemon::Impl::publishMapOutputs(LcmBus& bus, const MapperOutputs& outputs) {

@@ -19,6 +19,9 @@ struct DaemonConfig {
   /// daemon.groundtruth_out (path, default ""): the source's ground truth (TUM folders, synthetic
   /// worlds) written at exit in TUM format, next to the trajectory (--groundtruth-out).
   std::string groundtruth_out;
+  /// daemon.metrics_out (path, default ""): run metrics as JSON at exit (frames, rate, drops,
+  /// per-stage and capture-to-pose latency percentiles), for benchmarks (--metrics-out).
+  std::string metrics_out;
   /// daemon.status_period_s (double, default 1, 0.05..60, s): SLAMD_STATUS publication period.
   double status_period_s = 1.0;
   /// daemon.drain_deadline_s (double, default 5, 0..600, s): at shutdown, how long the stages may

@@ -29,6 +29,7 @@ struct DaemonOverrides {
   std::string trajectory_out;  ///< --trajectory-out
   std::string map_out;         ///< --map-out
   std::string groundtruth_out;  ///< --groundtruth-out
+  std::string metrics_out;      ///< --metrics-out
 };
 
 /// What a finished run did (logged at exit, returned for tests).
