@@ -44,3 +44,27 @@ function(slamd_add_program name)
   add_executable(${name} ${ARG_SOURCES})
   target_link_libraries(${name} PRIVATE ${ARG_DEPS} slamd::warnings)
 endfunction()
+
+# slamd_add_program_folders(): every subfolder of the current folder that has a CMakeLists.txt is
+# one program (or benchmark) and joins the build, unless it names an area left out with
+# SLAMD_SKIP_AREAS (bench/<area>, tools/slamd-<area>). Used by tools/, clients/ and bench/.
+function(slamd_add_program_folders)
+  file(GLOB children LIST_DIRECTORIES true RELATIVE ${CMAKE_CURRENT_SOURCE_DIR}
+       ${CMAKE_CURRENT_SOURCE_DIR}/*)
+  list(SORT children)
+  foreach(child IN LISTS children)
+    if(NOT IS_DIRECTORY ${CMAKE_CURRENT_SOURCE_DIR}/${child}
+       OR NOT EXISTS ${CMAKE_CURRENT_SOURCE_DIR}/${child}/CMakeLists.txt)
+      continue()
+    endif()
+    set(skip FALSE)
+    foreach(area IN LISTS SLAMD_SKIP_AREAS)
+      if(child STREQUAL area OR child STREQUAL "slamd-${area}")
+        set(skip TRUE)
+      endif()
+    endforeach()
+    if(NOT skip)
+      add_subdirectory(${child})
+    endif()
+  endforeach()
+endfunction()
