@@ -16,15 +16,6 @@
 namespace slamd {
 namespace {
 
-CameraIntrinsics camera() {
-  CameraIntrinsics K;
-  K.fx = 517.3;
-  K.fy = 516.5;
-  K.cx = 318.6;
-  K.cy = 255.3;
-  return K;
-}
-
 SE3 pose(int i) {
   const double t = i / 30.0;
   Vector6d xi;
@@ -37,7 +28,7 @@ const std::vector<RgbdFrame>& sequence() {
   static const std::vector<RgbdFrame> frames = [] {
     const test::TexturedBox box({-2, -1.5, -1}, {2, 1.5, 3}, 42);
     std::vector<RgbdFrame> out;
-    for (int i = 0; i < 30; ++i) out.push_back(box.render(pose(i), camera()));
+    for (int i = 0; i < 30; ++i) out.push_back(box.render(pose(i), test::fr1Camera()));
     return out;
   }();
   return frames;
@@ -91,7 +82,7 @@ BENCHMARK(BM_ProcessFrame)->Arg(0)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond
 
 std::vector<Correspondence> correspondences(int count, double outlier_fraction) {
   std::mt19937 rng(42);
-  const CameraIntrinsics K = camera();
+  const CameraIntrinsics K = test::fr1Camera();
   Vector6d xi;
   xi << 0.05, -0.03, 0.08, 0.04, -0.06, 0.02;
   const SE3 T = expSE3(xi);
@@ -114,7 +105,7 @@ void BM_RansacRigid(benchmark::State& state) {
   const auto matches = correspondences(static_cast<int>(state.range(0)), 0.5);
   std::mt19937 rng(1);
   for (auto _ : state) {
-    benchmark::DoNotOptimize(ransacRigid(matches, camera(), 3.0, 200, rng).num_inliers);
+    benchmark::DoNotOptimize(ransacRigid(matches, test::fr1Camera(), 3.0, 200, rng).num_inliers);
   }
 }
 BENCHMARK(BM_RansacRigid)->Arg(500)->Unit(benchmark::kMicrosecond);
@@ -122,7 +113,7 @@ BENCHMARK(BM_RansacRigid)->Arg(500)->Unit(benchmark::kMicrosecond);
 void BM_ConsistentClique(benchmark::State& state) {
   const auto matches = correspondences(static_cast<int>(state.range(0)), 0.5);
   for (auto _ : state) {
-    benchmark::DoNotOptimize(maximumConsistentClique(matches, camera(), 0.02, 0.0015).size());
+    benchmark::DoNotOptimize(maximumConsistentClique(matches, test::fr1Camera(), 0.02, 0.0015).size());
   }
 }
 BENCHMARK(BM_ConsistentClique)->Arg(500)->Unit(benchmark::kMicrosecond);
@@ -134,7 +125,7 @@ void BM_RefinePose(benchmark::State& state) {
   xi << 0.05, -0.03, 0.08, 0.04, -0.06, 0.02;
   const SE3 start = expSE3(xi * 1.02);
   for (auto _ : state) {
-    benchmark::DoNotOptimize(refinePose(matches, use, camera(), start, RefinementOptions()).iterations);
+    benchmark::DoNotOptimize(refinePose(matches, use, test::fr1Camera(), start, RefinementOptions()).iterations);
   }
 }
 BENCHMARK(BM_RefinePose)->Arg(500)->Unit(benchmark::kMicrosecond);

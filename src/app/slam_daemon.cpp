@@ -99,7 +99,7 @@ struct SlamDaemon::Impl {
   }
 
   int run(ShutdownSignals& signals);
-  void handleCommands(LcmBus& bus, ShutdownSignals& signals);
+  void handleCommands(ShutdownSignals& signals);
   void publishStatus(LcmBus& bus, StatusBuilder& builder, Pipeline& pipeline, const std::string& note);
   int writeOutputs();
   void runMappingStep(LcmBus& bus, const EstimatedPacket& packet, std::uint64_t& reset_seen,
@@ -118,8 +118,7 @@ int SlamDaemon::run(ShutdownSignals& signals) { return impl_->run(signals); }
 
 const DaemonSummary& SlamDaemon::summary() const { return impl_->summary; }
 
-void SlamDaemon::Impl::handleCommands(LcmBus& bus, ShutdownSignals& signals) {
-  (void)bus;
+void SlamDaemon::Impl::handleCommands(ShutdownSignals& signals) {
   while (auto command = commands.tryPop()) {
     switch (command->command) {
       case slamd::command_t::PAUSE:
@@ -351,7 +350,7 @@ int SlamDaemon::Impl::run(ShutdownSignals& signals) {
                                            : "SHUTDOWN command";
       break;
     }
-    handleCommands(*bus, signals);
+    handleCommands(signals);
     if (steadyNowNs() >= next_status_ns) {
       publishStatus(*bus, status_builder, pipeline, paused.load() ? "paused" : "");
       next_status_ns += status_period_ns;

@@ -100,4 +100,14 @@ class TexturedBox {
   std::array<cv::Mat, 6> textures_;
 };
 
+/// The TUM freiburg1 Kinect's pinhole intrinsics (640x480), used by the tracking tests and bench.
+inline CameraIntrinsics fr1Camera() {
+  CameraIntrinsics K;
+  K.fx = 517.3;
+  K.fy = 516.5;
+  K.cx = 318.6;
+  K.cy = 255.3;
+  return K;
+}
+
 }  // namespace slamd::test

@@ -11,15 +11,6 @@
 namespace slamd {
 namespace {
 
-CameraIntrinsics smallCamera() {
-  CameraIntrinsics K;
-  K.fx = 517.3;
-  K.fy = 516.5;
-  K.cx = 318.6;
-  K.cy = 255.3;
-  return K;
-}
-
 double rotationErrorDeg(const SE3& a, const SE3& b) {
   return rotationAngleRad(a.linear().transpose() * b.linear()) * 180.0 / M_PI;
 }
@@ -47,7 +38,7 @@ TEST(VisualOdometry, BadInputReturnsAStatusWithoutThrowing) {
   EXPECT_NE(r.status, OdometryStatus::kOk);
 
   RgbdFrame wrong_type;
-  wrong_type.intrinsics = smallCamera();
+  wrong_type.intrinsics = test::fr1Camera();
   wrong_type.gray = cv::Mat(480, 640, CV_8UC1, cv::Scalar(128));
   wrong_type.depth_m = cv::Mat(480, 640, CV_16UC1, cv::Scalar(1000));
   r = vo.processFrame(wrong_type);
@@ -63,7 +54,7 @@ TEST(VisualOdometry, BadInputReturnsAStatusWithoutThrowing) {
 
   // A textured image whose depth is all NaN or all zero: features but no depth.
   const test::TexturedBox box({-2, -1.5, -1}, {2, 1.5, 3}, 1);
-  RgbdFrame nan_depth = box.render(SE3::Identity(), smallCamera());
+  RgbdFrame nan_depth = box.render(SE3::Identity(), test::fr1Camera());
   nan_depth.depth_m.setTo(std::numeric_limits<float>::quiet_NaN());
   EXPECT_EQ(vo.processFrame(nan_depth).status, OdometryStatus::kNoDepth);
   nan_depth.depth_m.setTo(0.0f);
@@ -103,7 +94,7 @@ SequenceErrors runSynthetic(FrontEndType frontend, int frames) {
   SE3 prev_est = SE3::Identity();
   for (int i = 0; i < frames; ++i) {
     const SE3 T_true = trajectoryPose(i);
-    RgbdFrame frame = box.render(T_true, smallCamera());
+    RgbdFrame frame = box.render(T_true, test::fr1Camera());
     frame.utime = 1'000'000 + i * 33'333;
     frame.sequence = i;
     const OdometryResult r = vo.processFrame(frame);
@@ -157,13 +148,13 @@ TEST(VisualOdometry, PredictsThroughAShortGapThenDeclaresLostAndStartsANewSegmen
   const test::TexturedBox box({-2, -1.5, -1}, {2, 1.5, 3}, 5);
   int i = 0;
   auto good = [&]() {
-    RgbdFrame f = box.render(trajectoryPose(i), smallCamera());
+    RgbdFrame f = box.render(trajectoryPose(i), test::fr1Camera());
     f.utime = 1'000'000 + i * 33'333;
     ++i;
     return vo.processFrame(f);
   };
   auto blind = [&]() {
-    RgbdFrame f = box.render(trajectoryPose(i), smallCamera());
+    RgbdFrame f = box.render(trajectoryPose(i), test::fr1Camera());
     f.utime = 1'000'000 + i * 33'333;
     f.depth_m.setTo(std::numeric_limits<float>::quiet_NaN());
     ++i;
