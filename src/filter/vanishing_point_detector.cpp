@@ -113,6 +113,10 @@ VanishingPointDetector::VanishingPointDetector(const CameraIntrinsics& intrinsic
   }
 }
 
+VanishingPointDetector::VanishingPointDetector(const FilterConfig& config,
+                                               const CameraIntrinsics& intrinsics)
+    : VanishingPointDetector(intrinsics, config.vp) {}
+
 void VanishingPointDetector::extractSegments(const cv::Mat& gray) {
   const double scale = config_.image_scale;
   const cv::Mat* input = &gray;

@@ -9,8 +9,9 @@ VanishingPointFilter::VanishingPointFilter(const FilterConfig& config,
 FilterOutput VanishingPointFilter::process(const FilterInput& input) {
   FilterOutput out;
   out.predict_status = ekf_.predict(input.T_prev_curr, input.covariance, input.dt_s);
-  if (config_.enabled && config_.vanishing_points && !input.gray.empty()) {
-    out.vanishing_point = detector_.detect(input.gray);
+  if (config_.enabled && config_.vanishing_points &&
+      (input.detection || !input.gray.empty())) {
+    out.vanishing_point = input.detection ? *input.detection : detector_.detect(input.gray);
     if (out.vanishing_point->status == VanishingPointStatus::kOk) {
       out.update =
           ekf_.updateVanishingPoint(out.vanishing_point->pixel, out.vanishing_point->pixel_covariance);

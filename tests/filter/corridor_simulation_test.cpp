@@ -265,6 +265,40 @@ TEST(CorridorSimulation, FilterStageOnRenderedCorridorImagesBeatsOdometry) {
   EXPECT_EQ(filter.ekf().landmarks().size(), 1u);
 }
 
+TEST(CorridorSimulation, PrecomputedDetectionGivesTheSameEstimateWithoutDetectingAgain) {
+  // The daemon detects on its own thread (a VanishingPointDetector built from the same
+  // FilterConfig) and hands the result over in FilterInput::detection.
+  const CameraIntrinsics K;
+  const FilterConfig config;
+  VanishingPointFilter inside(config, K);
+  VanishingPointFilter precomputed(config, K);
+  VanishingPointDetector detector(config, K);
+  filter_test::NoisyOdometry odometry_model(0.005, 0.004, 9);
+  for (int k = 1; k <= 30; ++k) {
+    FilterInput in;
+    in.T_prev_curr = odometry_model.measure(truePose(k - 1).inverse() * truePose(k));
+    in.covariance = odometry_model.covariance();
+    in.dt_s = 1.0 / 30.0;
+    in.gray = filter_test::renderCorridor(K, truePose(k), static_cast<unsigned>(k));
+    const FilterOutput a = inside.process(in);
+    FilterInput handed = in;
+    handed.detection = detector.detect(in.gray);
+    handed.gray = cv::Mat();
+    const FilterOutput b = precomputed.process(handed);
+    ASSERT_TRUE(a.vanishing_point && b.vanishing_point);
+    EXPECT_EQ(a.vanishing_point->status, b.vanishing_point->status);
+    EXPECT_TRUE(a.vanishing_point->pixel.isApprox(b.vanishing_point->pixel));
+    ASSERT_EQ(a.update.has_value(), b.update.has_value());
+    if (a.update) {
+      EXPECT_EQ(a.update->status, b.update->status);
+    }
+    EXPECT_TRUE(a.pose.T_world_camera.isApprox(b.pose.T_world_camera, 1e-12));
+  }
+  EXPECT_EQ(precomputed.detector().counters().images, 0);
+  EXPECT_EQ(inside.detector().counters().images, 30);
+  EXPECT_GT(precomputed.ekf().counters().updates_accepted, 20);
+}
+
 TEST(CorridorSimulation, FilterStageCountsBadImagesAndKeepsPredicting) {
   const CameraIntrinsics K;
   VanishingPointFilter filter(FilterConfig{}, K);

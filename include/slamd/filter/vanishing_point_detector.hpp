@@ -1,10 +1,12 @@
 #pragma once
 // VanishingPointDetector: the dominant vanishing point of one grey image (paper 002, extended).
 //
-// Usage (one instance per camera, owned by the filter thread; no threads inside, not
-// thread-safe):
-//   VanishingPointDetector detector(intrinsics, VanishingPointConfig::load(config));
-//   VanishingPoint vp = detector.detect(frame.gray);
+// Usage (no threads inside, not thread-safe: one instance per thread that detects; it needs no
+// EKF, so the daemon can run it on its own thread in parallel with tracking):
+//   VanishingPointDetector detector(FilterConfig::load(config), intrinsics);
+//   VanishingPoint vp = detector.detect(frame.gray);  // a self-contained value
+//   // either hand it to the filter stage (FilterInput::detection, see vanishing_point_filter.hpp)
+//   // or, with an EKF at hand:
 //   if (vp.status == VanishingPointStatus::kOk) ekf.updateVanishingPoint(vp.pixel,
 //                                                                        vp.pixel_covariance);
 //
@@ -61,6 +63,8 @@ struct LineSegment {
   double length_px() const { return (p2_px - p1_px).norm(); }
 };
 
+/// The result of one detect() call: a plain value (no references into the detector), safe to move
+/// to another thread.
 struct VanishingPoint {
   VanishingPointStatus status = VanishingPointStatus::kEmptyImage;
   /// Vanishing point, pixels (may lie outside the image).
@@ -88,8 +92,12 @@ struct VanishingPointCounters {
 class VanishingPointDetector {
  public:
   VanishingPointDetector(const CameraIntrinsics& intrinsics, const VanishingPointConfig& config);
+  /// The same with the filter's options (uses config.vp only).
+  VanishingPointDetector(const FilterConfig& config, const CameraIntrinsics& intrinsics);
 
   /// Detects the dominant vanishing point of a CV_8UC1 image of the intrinsics' size.
+  /// @param gray the frame's grey image (RgbdFrame::gray), not modified, not kept
+  /// @return the vanishing point (pixels of this image) or why there is none; never throws
   VanishingPoint detect(const cv::Mat& gray);
 
   /// The segments of the last detect() call after filtering (for debugging and drawing).

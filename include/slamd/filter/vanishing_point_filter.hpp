@@ -8,6 +8,10 @@
 //   for each odometry increment:
 //     FilterInput in{utime, T_prev_curr, covariance, dt_s, frame.gray};  // gray may be empty
 //     FilterOutput out = filter.process(in);
+// or, with the detection done elsewhere (e.g. on a thread running in parallel with tracking, with
+// its own VanishingPointDetector built from the same FilterConfig and intrinsics):
+//     in.detection = detector.detect(frame.gray);  // then in.gray is not needed and not used
+//     FilterOutput out = filter.process(in);
 //     publish(out.pose);                              // T_world_camera + 6x6, source kFilter
 //     if (out.vanishing_point) publish(out.vanishing_point, out.update);  // vanishing_point_t
 //
@@ -37,12 +41,18 @@ struct FilterInput {
   Matrix6d covariance = Matrix6d::Identity() * 1e-6;
   double dt_s = 0.0;  ///< seconds since the previous frame
   cv::Mat gray;       ///< CV_8UC1 image of the current frame, or empty
+  /// Precomputed detection of the current frame (VanishingPointDetector::detect on this frame's
+  /// grey image, same intrinsics). When set, process() uses it as is and runs no detector of its
+  /// own (gray is ignored); when empty, process() detects on gray (if any). Either way it is
+  /// used only with filter.enabled and filter.vanishing_points.
+  std::optional<VanishingPoint> detection;
 };
 
 struct FilterOutput {
   PoseEstimate pose;  ///< filtered T_world_camera with its 6x6 covariance
   EkfPredictStatus predict_status = EkfPredictStatus::kOk;
-  /// Set when an image was given and vanishing points are enabled (status says if one was found).
+  /// Set when an image or a precomputed detection was given and vanishing points are enabled
+  /// (status says if one was found): the detection the filter used.
   std::optional<VanishingPoint> vanishing_point;
   /// Set when a vanishing point was found and handed to the EKF.
   std::optional<VpUpdateResult> update;
