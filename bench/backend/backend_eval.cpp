@@ -1,140 +1,306 @@
-// slamd-backend-eval: visual odometry plus the back end (loop closing, pose graph) over a
-// synthetic world; ATE of the keyframe trajectory with odometry only and after loop closing, and
-// the optimisation times for the graph sizes involved.
+// slamd-backend-eval: visual odometry plus the back end (local edges, loop closing,
+// relocalisation, pose graph) over a sequence; ATE/RPE with odometry only and with the back end,
+// and the optimisation times for the graph sizes involved.
 //
-//   slamd-backend-eval --scene corridor_loop [--set backend.robust_kernel=huber]
+//   slamd-backend-eval --source synthetic:corridor_loop
+//   slamd-backend-eval --source tum:../shared/data/tum_fr1_xyz --config config/tum_fr1.yaml
+//       --trajectory slam.txt --odometry-trajectory vo.txt
+//   slamd-backend-eval ... --blackout 300:40     # frames 300..339 blank: LOST, relocalisation
 //
-// The vocabulary is trained at start-up on keyframes of another scene (room by default), so the
-// evaluated world never leaks into it. OpenCV runs on one thread. Prints a summary on stdout.
+// Trajectories (TUM format, every frame): odometry as tracking made it; "slam": each frame is the
+// final corrected pose of its reference keyframe composed with the frame's odometry pose relative
+// to that keyframe; "online": each frame corrected with the T_world_odometry known when it was
+// processed (what the daemon can publish live). The vocabulary is loaded from --vocabulary or
+// backend.vocabulary_file, else trained on another synthetic scene (room by default), so the
+// evaluated world never leaks into it. OpenCV runs on one thread. Prints a summary and, as the
+// last line of stdout, one JSON metrics report (schema slamd.metrics/1).
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
+#include <iostream>
+#include <limits>
 #include <memory>
 #include <string>
+#include <unordered_map>
 #include <vector>
 
 #include <opencv2/core.hpp>
-#include <opencv2/imgproc.hpp>
 
 #include "slamd/backend/backend.hpp"
 #include "slamd/common/program_options.hpp"
+#include "slamd/common/time.hpp"
+#include "slamd/common/trajectory.hpp"
+#include "slamd/eval/metrics_report.hpp"
 #include "slamd/eval/trajectory_error.hpp"
-#include "slamd/synth/synthetic_source.hpp"
+#include "slamd/sources/create_frame_source.hpp"
 #include "slamd/tracking/visual_odometry.hpp"
 
 using namespace slamd;
 
 namespace {
 
-Vocabulary trainVocabulary(const std::string& scene, const BackendConfig& backend) {
-  Config config = Config::fromFile(SLAMD_SOURCE_DIR "/config/synthetic.yaml");
-  SyntheticSource source(scene, SyntheticConfig::load(config));
-  TrackingConfig tracking;
-  auto extractor = makeFeatureExtractor(tracking);
-  std::vector<cv::Mat> descriptors;
-  const int step = std::max(1, source.frameCount() / 20);
-  for (int index = 0; index < source.frameCount(); index += step) {
-    const RgbdFramePtr frame = source.renderFrame(index);
-    cv::Mat gray = frame->gray;
-    if (gray.empty()) cv::cvtColor(frame->color_bgr, gray, cv::COLOR_BGR2GRAY);
-    FeatureSet features;
-    extractor->extract(gray, features);
-    descriptors.push_back(features.descriptors);
-  }
-  return Vocabulary::train(descriptors, backend.vocabulary_branching, backend.vocabulary_depth,
-                           42);
+struct Errors {
+  double ate_m = std::numeric_limits<double>::quiet_NaN();
+  double rpe_m = std::numeric_limits<double>::quiet_NaN();
+  double rpe_deg = std::numeric_limits<double>::quiet_NaN();
+};
+
+Errors evaluate(const Trajectory& truth, const Trajectory& estimate) {
+  Errors e;
+  if (truth.empty() || estimate.size() < 3) return e;
+  e.ate_m = eval::computeAte(truth, estimate).translation_m.rmse;
+  const eval::RpeResult rpe = eval::computeRpe(truth, estimate);
+  e.rpe_m = rpe.translation_m.rmse;
+  e.rpe_deg = rpe.rotation_deg.rmse;
+  return e;
 }
 
-double ateRmse(const Trajectory& truth, const Trajectory& estimate) {
-  return eval::computeAte(truth, estimate).translation_m.rmse;
+double percentileOf(std::vector<double> samples, double p) {
+  if (samples.empty()) return 0.0;
+  std::sort(samples.begin(), samples.end());
+  const std::size_t index = static_cast<std::size_t>(p / 100.0 * (samples.size() - 1) + 0.5);
+  return samples[std::min(index, samples.size() - 1)];
+}
+
+double mean(const std::vector<double>& samples) {
+  double sum = 0.0;
+  for (double v : samples) sum += v;
+  return samples.empty() ? 0.0 : sum / static_cast<double>(samples.size());
+}
+
+// A frame with no depth and a black image: tracking fails on it (for --blackout).
+RgbdFramePtr blankFrame(const RgbdFrame& frame) {
+  auto blank = std::make_shared<RgbdFrame>(frame);
+  blank->depth_m = cv::Mat(frame.depth_m.size(), CV_32FC1,
+                           cv::Scalar(std::numeric_limits<float>::quiet_NaN()));
+  if (!frame.gray.empty()) blank->gray = cv::Mat::zeros(frame.gray.size(), CV_8UC1);
+  if (!frame.color_bgr.empty()) blank->color_bgr = cv::Mat::zeros(frame.color_bgr.size(), CV_8UC3);
+  return blank;
+}
+
+void write(const std::string& path, const Trajectory& trajectory, const std::string& comment) {
+  if (!path.empty()) writeTumTrajectory(path, trajectory, comment);
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
   ProgramOptions options("slamd-backend-eval",
-                         "Visual odometry + loop closing on a synthetic world: ATE before/after.");
-  options.addOption("scene", "SCENE", "synthetic scene (corridor_loop, corridor, room)",
+                         "Visual odometry + back end over a sequence: ATE/RPE before and after.");
+  options.addOption("source", "SOURCE", "tum:DIR or synthetic:SCENE", "");
+  options.addOption("scene", "SCENE", "synthetic scene (same as --source synthetic:SCENE)",
                     "corridor_loop");
   options.addOption("vocabulary-scene", "SCENE", "scene the vocabulary is trained on", "room");
+  options.addOption("vocabulary", "FILE", "vocabulary file (overrides backend.vocabulary_file)");
+  options.addOption("trajectory", "FILE", "write the full-SLAM per-frame trajectory (TUM)");
+  options.addOption("odometry-trajectory", "FILE", "write the odometry trajectory (TUM)");
+  options.addOption("online-trajectory", "FILE", "write the live-corrected trajectory (TUM)");
+  options.addOption("blackout", "START:COUNT", "replace COUNT frames from START by blank ones");
+  options.addOption("max-frames", "N", "stop after N frames (0 = all)", "0");
+  options.addFlag("tracking-covariance",
+                  "odometry edges weighted by tracking's covariance instead of the fixed ratio");
   if (!options.parse(argc, argv)) return options.exitCode();
   cv::setNumThreads(1);
 
-  Config config = options.loadConfig(SLAMD_SOURCE_DIR "/config/synthetic.yaml");
-  BackendConfig backend_config = BackendConfig::load(config);
-  const TrackingConfig tracking = TrackingConfig::load(config);
-  SyntheticSource source(options.value("scene"), SyntheticConfig::load(config));
-  const Trajectory truth = *source.groundTruth();
+  std::string spec = options.value("source");
+  if (spec.empty()) spec = "synthetic:" + options.value("scene");
+  const bool synthetic = spec.rfind("synthetic:", 0) == 0;
+  Config config;
+  std::unique_ptr<FrameSource> source;
+  BackendConfig backend_config;
+  TrackingConfig tracking;
+  try {
+    config = options.loadConfig(synthetic ? SLAMD_SOURCE_DIR "/config/synthetic.yaml"
+                                          : SLAMD_SOURCE_DIR "/config/tum_fr1.yaml");
+    backend_config = BackendConfig::load(config);
+    tracking = TrackingConfig::load(config);
+    source = createFrameSource(spec, config);
+    source->open();
+  } catch (const ConfigError& e) {
+    std::cerr << e.what() << "\n";
+    return kExitConfigError;
+  } catch (const SourceError& e) {
+    std::cerr << e.what() << "\n";
+    return kExitSourceError;
+  }
+  long blackout_start = -1, blackout_count = 0;
+  if (options.has("blackout")) {
+    const std::string b = options.value("blackout");
+    const auto colon = b.find(':');
+    if (colon == std::string::npos) {
+      std::cerr << "--blackout wants START:COUNT\n";
+      return kExitUsage;
+    }
+    blackout_start = std::stol(b.substr(0, colon));
+    blackout_count = std::stol(b.substr(colon + 1));
+  }
+  const long max_frames = std::stol(options.value("max-frames"));
+  const bool tracking_covariance = options.has("tracking-covariance");
 
+  std::shared_ptr<const Vocabulary> vocabulary;
   const auto t0 = std::chrono::steady_clock::now();
-  auto vocabulary = std::make_shared<const Vocabulary>(
-      trainVocabulary(options.value("vocabulary-scene"), backend_config));
-  std::printf("vocabulary: %d words, trained in %.1f s\n", vocabulary->numWords(),
+  try {
+    if (options.has("vocabulary")) backend_config.vocabulary_file = options.value("vocabulary");
+    if (!backend_config.vocabulary_file.empty()) {
+      vocabulary = loadOrTrainVocabulary(backend_config);
+    } else {
+      vocabulary = std::make_shared<const Vocabulary>(trainVocabularyOnSyntheticScene(
+          options.value("vocabulary-scene"), backend_config.vocabulary_branching,
+          backend_config.vocabulary_depth));
+    }
+  } catch (const VocabularyError& e) {
+    std::cerr << e.what() << "\n";
+    return kExitConfigError;
+  }
+  std::printf("vocabulary: %d words, ready in %.1f s\n", vocabulary->numWords(),
               std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
 
   VisualOdometry vo(tracking);
   Backend backend(backend_config, vocabulary);
   std::vector<KeyframePtr> keyframes;
-  // Every frame's odometry pose and the keyframe it follows (for the corrected trajectory).
-  Trajectory frames_odometry;
+  std::unordered_map<std::int64_t, std::size_t> keyframe_index;
+  Trajectory frames_odometry, frames_online;
   std::vector<std::size_t> frame_keyframe;
-  double loop_detection_ms_sum = 0.0;
-  double loop_detection_ms_max = 0.0;
-  source.open();
-  for (int index = 0; index < source.frameCount(); ++index) {
-    const FrameRead read = source.next(std::chrono::milliseconds(1000));
+  std::vector<double> loop_ms, optimisation_ms, local_ms, iterations;
+  int optimisations = 0, lost_frames = 0, relocalization_attempts = 0;
+  SE3 T_world_odometry = SE3::Identity();
+  long index = 0;
+  while (max_frames <= 0 || index < max_frames) {
+    const FrameRead read = source->next(std::chrono::milliseconds(1000));
+    if (read.status == FrameRead::Status::kEndOfStream) break;
     if (read.status != FrameRead::Status::kFrame) continue;
-    const OdometryResult r = vo.processFrame(read.frame);
-    if (r.keyframe) keyframes.push_back(r.keyframe);
+    const bool blank = index >= blackout_start && index < blackout_start + blackout_count;
+    const OdometryResult r = vo.processFrame(blank ? blankFrame(*read.frame) : read.frame);
+    ++index;
+    if (r.tracking_state == TrackingState::kLost) ++lost_frames;
+    if (r.keyframe) {
+      keyframe_index[r.keyframe->id] = keyframes.size();
+      const bool same_segment =
+          !keyframes.empty() && keyframes.back()->segment == r.keyframe->segment;
+      const bool measured_from_previous =
+          same_segment && r.reference_keyframe_id == keyframes.back()->id;
+      keyframes.push_back(r.keyframe);
+      const auto start = std::chrono::steady_clock::now();
+      const BackendUpdate u = tracking_covariance && measured_from_previous
+                                  ? backend.addKeyframe(r.keyframe, r.covariance_ref_curr)
+                                  : backend.addKeyframe(r.keyframe);
+      const double total_ms =
+          std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
+              .count();
+      T_world_odometry = u.T_world_odometry;
+      loop_ms.push_back(u.loop.time_ms);
+      if (u.optimized) {
+        ++optimisations;
+        optimisation_ms.push_back(u.optimization.time_ms);
+        iterations.push_back(u.optimization.iterations);
+      }
+      local_ms.push_back(total_ms - u.loop.time_ms - (u.optimized ? u.optimization.time_ms : 0.0));
+      if (u.loop.status == LoopStatus::kLoopFound) {
+        std::printf("frame %ld: loop keyframe %ld -> %ld (score %.3f, %d inliers)\n", index - 1,
+                    static_cast<long>(u.loop.query_id), static_cast<long>(u.loop.match_id),
+                    u.loop.score, u.loop.num_inliers);
+      }
+      if (u.relocalization_attempted) {
+        ++relocalization_attempts;
+        std::printf("frame %ld: keyframe %ld (segment %ld) relocalisation attempt %d: %s%s\n",
+                    index - 1, static_cast<long>(r.keyframe->id),
+                    static_cast<long>(r.keyframe->segment), u.relocalization_attempts,
+                    loopStatusName(u.relocalization.status),
+                    u.relocalized ? (" -> keyframe " + std::to_string(u.relocalization.match_id) +
+                                     " (" + std::to_string(u.relocalization.num_inliers) +
+                                     " inliers)").c_str()
+                                  : "");
+      }
+    }
     if (!keyframes.empty()) {
-      frames_odometry.push_back({static_cast<double>(r.utime) * 1e-6, r.T_world_camera});
-      frame_keyframe.push_back(keyframes.size() - 1);
-    }
-    if (!r.keyframe) continue;
-    const BackendUpdate u = backend.addKeyframe(r.keyframe);
-    loop_detection_ms_sum += u.loop.time_ms;
-    loop_detection_ms_max = std::max(loop_detection_ms_max, u.loop.time_ms);
-    if (u.loop.status == LoopStatus::kLoopFound) {
-      std::printf("frame %d: loop keyframe %ld -> %ld (score %.3f, %d inliers)\n", index,
-                  static_cast<long>(u.loop.query_id), static_cast<long>(u.loop.match_id),
-                  u.loop.score, u.loop.num_inliers);
-    }
-    if (u.optimized) {
-      std::printf("  pose graph: %d nodes, %d edges, %s, %d iterations, cost %.1f -> %.1f, "
-                  "%.2f ms\n",
-                  u.optimization.num_nodes, u.optimization.num_edges,
-                  optimizationStatusName(u.optimization.status), u.optimization.iterations,
-                  u.optimization.initial_cost, u.optimization.final_cost,
-                  u.optimization.time_ms);
+      std::size_t reference = keyframes.size() - 1;
+      if (const auto it = keyframe_index.find(r.reference_keyframe_id);
+          it != keyframe_index.end() && keyframes[it->second]->segment == r.segment) {
+        reference = it->second;
+      }
+      const double t_s = utimeToSeconds(r.utime);
+      frames_odometry.push_back({t_s, r.T_world_camera});
+      frames_online.push_back({t_s, T_world_odometry * r.T_world_camera});
+      frame_keyframe.push_back(reference);
     }
   }
+  source->close();
 
-  Trajectory odometry, corrected, truth_at_keyframes;
-  for (const KeyframePtr& kf : keyframes) {
-    const double t_s = static_cast<double>(kf->utime) * 1e-6;
-    odometry.push_back({t_s, kf->T_world_camera});
-    corrected.push_back({t_s, backend.pose(kf->id)});
-  }
-  const double ate_odometry = ateRmse(truth, odometry);
-  const double ate_corrected = ateRmse(truth, corrected);
-  std::printf("%s: %d frames, %zu keyframes, %d loops; loop detection %.1f ms mean, %.1f ms "
-              "max per keyframe\n",
-              options.value("scene").c_str(), source.frameCount(), keyframes.size(),
-              backend.numLoops(), loop_detection_ms_sum / std::max<std::size_t>(1, keyframes.size()),
-              loop_detection_ms_max);
-  // Offline corrected trajectory: each frame moves with the keyframe it follows.
-  Trajectory frames_corrected;
+  // Full SLAM: each frame moves with its reference keyframe's final correction.
+  Trajectory frames_slam;
   for (std::size_t f = 0; f < frames_odometry.size(); ++f) {
     const KeyframePtr& kf = keyframes[frame_keyframe[f]];
-    frames_corrected.push_back({frames_odometry[f].timestamp_s,
-                                backend.pose(kf->id) * kf->T_world_camera.inverse() *
-                                    frames_odometry[f].T_world_camera});
+    frames_slam.push_back({frames_odometry[f].timestamp_s,
+                           backend.pose(kf->id) * kf->T_world_camera.inverse() *
+                               frames_odometry[f].T_world_camera});
   }
-  std::printf("frame ATE RMSE: odometry %.4f m, corrected through the keyframes %.4f m (%.1fx)\n",
-              ateRmse(truth, frames_odometry), ateRmse(truth, frames_corrected),
-              ateRmse(truth, frames_odometry) /
-                  std::max(ateRmse(truth, frames_corrected), 1e-12));
-  std::printf("keyframe ATE RMSE: odometry %.4f m, after loop closing %.4f m (%.1fx)\n",
-              ate_odometry, ate_corrected, ate_odometry / std::max(ate_corrected, 1e-12));
-  return 0;
+  Trajectory kf_odometry, kf_corrected;
+  for (const KeyframePtr& kf : keyframes) {
+    const double t_s = utimeToSeconds(kf->utime);
+    kf_odometry.push_back({t_s, kf->T_world_camera});
+    kf_corrected.push_back({t_s, backend.pose(kf->id)});
+  }
+  try {
+    write(options.value("trajectory"), frames_slam, "slamd visual odometry + back end");
+    write(options.value("odometry-trajectory"), frames_odometry, "slamd visual odometry");
+    write(options.value("online-trajectory"), frames_online,
+          "slamd visual odometry corrected live by the back end");
+  } catch (const std::exception& e) {
+    std::cerr << e.what() << "\n";
+    return kExitOutputError;
+  }
+
+  eval::MetricsReport report("slamd-backend-eval");
+  report.setText("source", spec);
+  report.set("frames", static_cast<double>(index));
+  report.set("keyframes_count", static_cast<double>(keyframes.size()));
+  report.set("loops_count", backend.numLoops());
+  report.set("local_edges_count", backend.numLocalEdges());
+  report.set("relocalizations_count", backend.numRelocalizations());
+  report.set("relocalization_attempts_count", relocalization_attempts);
+  report.set("graph_nodes_count", static_cast<double>(backend.graph().numNodes()));
+  report.set("graph_edges_count", static_cast<double>(backend.graph().numEdges()));
+  report.setLatencySamples("optimization", optimisation_ms);
+  report.setLatencySamples("loop_detection", loop_ms);
+  report.setLatencySamples("local_edges", local_ms);
+  std::printf("%s: %ld frames (%d lost), %zu keyframes, %d segments joined by relocalisation "
+              "(%d attempts), %d loops, %d local edges; graph %zu nodes, %zu edges\n",
+              spec.c_str(), index, lost_frames, keyframes.size(), backend.numRelocalizations(),
+              relocalization_attempts, backend.numLoops(), backend.numLocalEdges(),
+              backend.graph().numNodes(), backend.graph().numEdges());
+  report.set("optimization_iterations_mean", mean(iterations));
+  std::printf("per keyframe: %d optimisations (%.1f iterations mean), %.2f ms mean, %.2f ms p95, "
+              "%.2f ms max; loop detection %.2f ms mean; local matching %.2f ms mean\n",
+              optimisations, mean(iterations), mean(optimisation_ms),
+              percentileOf(optimisation_ms, 95),
+              percentileOf(optimisation_ms, 100), mean(loop_ms), mean(local_ms));
+  if (const auto gt = source->groundTruth(); gt && !gt->empty()) {
+    try {
+      const Errors odometry = evaluate(*gt, frames_odometry);
+      const Errors slam = evaluate(*gt, frames_slam);
+      const Errors online = evaluate(*gt, frames_online);
+      const Errors kf_before = evaluate(*gt, kf_odometry);
+      const Errors kf_after = evaluate(*gt, kf_corrected);
+      report.set("odometry_ate_m", odometry.ate_m);
+      report.set("slam_ate_m", slam.ate_m);
+      report.set("online_ate_m", online.ate_m);
+      report.set("odometry_rpe_translation_m", odometry.rpe_m);
+      report.set("slam_rpe_translation_m", slam.rpe_m);
+      report.set("odometry_rpe_rotation_deg", odometry.rpe_deg);
+      report.set("slam_rpe_rotation_deg", slam.rpe_deg);
+      std::printf("frame ATE RMSE: odometry %.4f m, full SLAM %.4f m (%.1fx), online %.4f m\n",
+                  odometry.ate_m, slam.ate_m, odometry.ate_m / std::max(slam.ate_m, 1e-12),
+                  online.ate_m);
+      std::printf("frame RPE(1 s) RMSE: odometry %.4f m / %.3f deg, full SLAM %.4f m / %.3f deg\n",
+                  odometry.rpe_m, odometry.rpe_deg, slam.rpe_m, slam.rpe_deg);
+      std::printf("keyframe ATE RMSE: odometry %.4f m, after the back end %.4f m (%.1fx)\n",
+                  kf_before.ate_m, kf_after.ate_m, kf_before.ate_m / std::max(kf_after.ate_m, 1e-12));
+    } catch (const std::exception& e) {
+      std::cerr << "evaluation failed: " << e.what() << "\n";
+    }
+  }
+  std::fflush(stdout);
+  report.print(std::cout);
+  return kExitOk;
 }

@@ -1,5 +1,8 @@
 #include "slamd/backend/backend.hpp"
 
+#include <algorithm>
+#include <cmath>
+
 namespace slamd {
 
 namespace {
@@ -8,6 +11,13 @@ namespace {
 // previous keyframe: it only keeps the normal equations regular until a loop places the segment.
 constexpr double kSegmentLinkSigma = 1e3;
 constexpr double kOdometryFloorM = 0.005;
+// Floor on tracking's own odometry covariance: the normal equations assume perfect matches.
+constexpr double kTrackingFloorM = 0.001;
+constexpr double kTrackingFloorRad = 0.05 * M_PI / 180.0;
+
+double rotationAngle(const SE3& T) {
+  return Eigen::AngleAxisd(T.rotation()).angle();
+}
 
 }  // namespace
 
@@ -25,31 +35,163 @@ Matrix6d Backend::odometryInformation(const SE3& T_prev_curr) const {
   return diagonal.asDiagonal();
 }
 
-BackendUpdate Backend::addKeyframe(const KeyframePtr& keyframe) {
+std::int64_t Backend::segmentRoot(std::int64_t segment) const {
+  auto it = segment_parent_.find(segment);
+  while (it != segment_parent_.end() && it->second != segment) {
+    segment = it->second;
+    it = segment_parent_.find(segment);
+  }
+  return segment;
+}
+
+BackendUpdate Backend::addKeyframe(const KeyframePtr& keyframe) { return add(keyframe, nullptr); }
+
+BackendUpdate Backend::addKeyframe(const KeyframePtr& keyframe,
+                                   const Matrix6d& covariance_prev_curr) {
+  return add(keyframe, &covariance_prev_curr);
+}
+
+void Backend::addLocalEdges(const Keyframe& keyframe, BackendUpdate& update) {
+  if (config_.local_edges <= 0) return;
+  const std::int64_t root = segmentRoot(keyframe.segment);
+  const std::int64_t previous_id = previous_ != nullptr ? previous_->id : -1;
+  // The previous keyframe is already linked by odometry from the same images; keyframes of
+  // segments not joined to this one have no meaningful relative estimate to check against.
+  const LoopDetector::KeyframeFilter allowed = [&](std::int64_t id, std::int64_t segment) {
+    return id != previous_id && graph_.hasNode(id) && segmentRoot(segment) == root;
+  };
+  const std::vector<LoopDetection> matches = detector_.matchLocal(keyframe, allowed);
+  const KeyframeInfo& query = keyframes_.at(keyframe.id);
+  const SE3& T_world_query = graph_.pose(keyframe.id);
+  for (const LoopDetection& match : matches) {
+    if (update.num_local_edges >= config_.local_edges) break;
+    // False-match protection: the measured relative pose must agree with the current estimate
+    // (odometry drift plus earlier corrections) within what drift allows over the path between.
+    const SE3 T_estimate = graph_.pose(match.match_id).inverse() * T_world_query;
+    const SE3 T_difference = T_estimate.inverse() * match.T_match_query;
+    const auto info = keyframes_.find(match.match_id);
+    const double path_m = info != keyframes_.end() && info->second.segment == keyframe.segment
+                              ? std::abs(query.path_length_m - info->second.path_length_m)
+                              : 0.0;
+    const double allowed_m =
+        config_.local_max_discrepancy_m + config_.local_max_discrepancy_ratio * path_m;
+    if (T_difference.translation().norm() > allowed_m ||
+        rotationAngle(T_difference) > config_.local_max_discrepancy_rad) {
+      ++update.num_local_rejected;
+      continue;
+    }
+    if (graph_.addEdge({match.match_id, keyframe.id, match.T_match_query, match.information,
+                        EdgeKind::kLocal})) {
+      ++update.num_local_edges;
+      ++num_local_edges_;
+    }
+  }
+}
+
+void Backend::tryRelocalization(const Keyframe& keyframe, BackendUpdate& update) {
+  const std::int64_t root = segmentRoot(keyframe.segment);
+  const LoopDetector::KeyframeFilter other_map = [&](std::int64_t, std::int64_t segment) {
+    return segmentRoot(segment) != root;
+  };
+  ++relocalization_attempts_;
+  update.relocalization_attempted = true;
+  update.relocalization_attempts = relocalization_attempts_;
+  update.relocalization = detector_.query(keyframe.features, keyframe.intrinsics, other_map,
+                                          config_.relocalization_min_inliers);
+  update.relocalization.query_id = keyframe.id;
+  if (update.relocalization.status != LoopStatus::kLoopFound) return;
+  const LoopDetection& match = update.relocalization;
+  if (!graph_.addEdge({match.match_id, keyframe.id, match.T_match_query, match.information,
+                       EdgeKind::kRelocalization})) {
+    return;
+  }
+  // Move the whole new segment rigidly next to the match before optimising: the weak tie gives
+  // no useful initial value, and LM converges from a consistent start.
+  const SE3 T_world_query = graph_.pose(match.match_id) * match.T_match_query;
+  const SE3 T_correction = T_world_query * graph_.pose(keyframe.id).inverse();
+  for (std::int64_t id : graph_.nodeIds()) {
+    const auto info = keyframes_.find(id);
+    if (info != keyframes_.end() && segmentRoot(info->second.segment) == root) {
+      graph_.setPose(id, T_correction * graph_.pose(id));
+    }
+  }
+  const std::int64_t match_root = segmentRoot(keyframes_.at(match.match_id).segment);
+  segment_parent_[root] = match_root;
+  update.relocalized = true;
+  ++num_relocalizations_;
+}
+
+BackendUpdate Backend::add(const KeyframePtr& keyframe, const Matrix6d* covariance_prev_curr) {
   BackendUpdate update;
-  if (keyframe == nullptr) return update;
+  if (keyframe == nullptr || graph_.hasNode(keyframe->id)) return update;
   update.keyframe_id = keyframe->id;
+  KeyframeInfo info;
+  info.segment = keyframe->segment;
+  bool new_segment = false;
   if (previous_ == nullptr) {
     graph_.addNode(keyframe->id, keyframe->T_world_camera);
+    first_segment_ = keyframe->segment;
   } else {
     // Initial value: the previous keyframe's corrected pose composed with the odometry step.
     const SE3 T_prev_curr = previous_->T_world_camera.inverse() * keyframe->T_world_camera;
     graph_.addNode(keyframe->id, graph_.pose(previous_->id) * T_prev_curr);
     PoseGraphEdge edge{previous_->id, keyframe->id, T_prev_curr, odometryInformation(T_prev_curr),
                        EdgeKind::kOdometry};
-    if (keyframe->segment != previous_->segment) {
+    new_segment = keyframe->segment != previous_->segment;
+    if (new_segment) {
       edge.information = Matrix6d::Identity() / (kSegmentLinkSigma * kSegmentLinkSigma);
+      relocalization_attempts_ = 0;
+    } else {
+      info.path_length_m = keyframes_.at(previous_->id).path_length_m + T_prev_curr.translation().norm();
+      if (covariance_prev_curr != nullptr && covariance_prev_curr->allFinite()) {
+        Matrix6d covariance = 0.5 * (*covariance_prev_curr + covariance_prev_curr->transpose());
+        for (int k = 0; k < 3; ++k) covariance(k, k) += kTrackingFloorM * kTrackingFloorM;
+        for (int k = 3; k < 6; ++k) covariance(k, k) += kTrackingFloorRad * kTrackingFloorRad;
+        const Matrix6d information = covariance.inverse();
+        if (information.allFinite()) edge.information = 0.5 * (information + information.transpose());
+      }
     }
     graph_.addEdge(edge);
   }
-  previous_ = keyframe;
+  keyframes_[keyframe->id] = info;
+  segment_parent_.emplace(keyframe->segment, keyframe->segment);
 
+  bool changed = false;
+  bool loop_or_relocalization = false;
+  // Relocalisation first: once the segment is joined, this keyframe's local edges can reach the
+  // map it joined.
+  if (config_.relocalization && segmentRoot(keyframe->segment) != segmentRoot(first_segment_)) {
+    tryRelocalization(*keyframe, update);
+    changed = changed || update.relocalized;
+    loop_or_relocalization = update.relocalized;
+  }
+  update.relocalization_pending = segmentRoot(keyframe->segment) != segmentRoot(first_segment_);
+
+  addLocalEdges(*keyframe, update);
+  changed = changed || (config_.optimize_every_keyframe && update.num_local_edges > 0);
+
+  previous_ = keyframe;
   update.loop = detector_.processKeyframe(*keyframe);
   if (update.loop.status == LoopStatus::kLoopFound &&
       graph_.addEdge({update.loop.match_id, update.loop.query_id, update.loop.T_match_query,
                       update.loop.information, EdgeKind::kLoop})) {
     ++num_loops_;
-    update.optimization = graph_.optimize(options_);
+    changed = true;
+    loop_or_relocalization = true;
+    // A loop into another segment joins the two maps as a relocalisation does.
+    const auto match = keyframes_.find(update.loop.match_id);
+    if (match != keyframes_.end()) {
+      const std::int64_t a = segmentRoot(match->second.segment);
+      const std::int64_t b = segmentRoot(keyframe->segment);
+      if (a != b) segment_parent_[b] = a;
+    }
+  }
+  if (changed) {
+    PoseGraphOptions options = options_;
+    if (!loop_or_relocalization) {
+      options.max_iterations = std::min(options.max_iterations, config_.local_max_iterations);
+    }
+    update.optimization = graph_.optimize(options);
     update.optimized = true;
     update.corrected_poses.reserve(graph_.numNodes());
     for (std::int64_t id : graph_.nodeIds()) update.corrected_poses.emplace_back(id, graph_.pose(id));

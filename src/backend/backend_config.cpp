@@ -59,6 +59,28 @@ BackendConfig BackendConfig::load(Config& config) {
       config.getDouble("backend.loop_max_drift_m", c.loop_max_drift_m, 0.0, 1000.0);
   c.loop_max_drift_ratio =
       config.getDouble("backend.loop_max_drift_ratio", c.loop_max_drift_ratio, 0.0, 10.0);
+  c.local_edges = config.getInt("backend.local_edges", c.local_edges, 0, 50);
+  c.local_max_candidates =
+      config.getInt("backend.local_max_candidates", c.local_max_candidates, 1, 200);
+  c.local_min_inliers = config.getInt("backend.local_min_inliers", c.local_min_inliers, 6, 10000);
+  c.local_max_discrepancy_m = config.getDouble("backend.local_max_discrepancy_m",
+                                               c.local_max_discrepancy_m, 0.0, 100.0);
+  c.local_max_discrepancy_ratio = config.getDouble("backend.local_max_discrepancy_ratio",
+                                                   c.local_max_discrepancy_ratio, 0.0, 10.0);
+  c.local_max_discrepancy_rad = config.getDouble("backend.local_max_discrepancy_rad",
+                                                 c.local_max_discrepancy_rad, 0.0, 3.2);
+  c.local_min_sigma_m =
+      config.getDouble("backend.local_min_sigma_m", c.local_min_sigma_m, 0.0, 1.0);
+  c.local_min_sigma_rad =
+      config.getDouble("backend.local_min_sigma_rad", c.local_min_sigma_rad, 0.0, 1.0);
+  c.optimize_every_keyframe =
+      config.getBool("backend.optimize_every_keyframe", c.optimize_every_keyframe);
+  c.local_max_iterations =
+      config.getInt("backend.local_max_iterations", c.local_max_iterations, 1, 1000);
+  c.relocalization = config.getBool("backend.relocalization", c.relocalization);
+  c.relocalization_min_inliers = config.getInt("backend.relocalization_min_inliers",
+                                               c.relocalization_min_inliers, 6, 10000);
+  c.vocabulary_file = config.getString("backend.vocabulary_file", c.vocabulary_file);
   return c;
 }
 

@@ -43,7 +43,8 @@ LoopDetector::LoopDetector(const BackendConfig& config,
 
 std::vector<LoopDetector::Candidate> LoopDetector::retrieve(const BowVector& bow,
                                                             std::size_t num_searchable,
-                                                            double min_score) const {
+                                                            double min_score,
+                                                            const KeyframeFilter& allowed) const {
   std::vector<double> scores(num_searchable, 0.0);
   for (const auto& [word, weight] : bow) {
     const auto it = inverted_.find(word);
@@ -56,7 +57,8 @@ std::vector<LoopDetector::Candidate> LoopDetector::retrieve(const BowVector& bow
   }
   std::vector<Candidate> candidates;
   for (std::size_t e = 0; e < num_searchable; ++e) {
-    if (scores[e] >= min_score && scores[e] > 0.0) {
+    if (scores[e] >= min_score && scores[e] > 0.0 &&
+        (!allowed || allowed(entries_[e].id, entries_[e].segment))) {
       candidates.push_back({static_cast<int>(e), scores[e]});
     }
   }
@@ -66,7 +68,8 @@ std::vector<LoopDetector::Candidate> LoopDetector::retrieve(const BowVector& bow
 }
 
 bool LoopDetector::verify(const FeatureSet& query, const CameraIntrinsics& intrinsics,
-                          const Entry& e, LoopDetection& detection) {
+                          const Entry& e, LoopDetection& detection, int min_inliers,
+                          double min_sigma_m, double min_sigma_rad) {
   const FeatureSet& ref = e.features;
   std::vector<int> ref_rows;
   std::vector<BinaryDescriptor> ref_descriptors;
@@ -121,11 +124,11 @@ bool LoopDetector::verify(const FeatureSet& query, const CameraIntrinsics& intri
     matches.push_back(c);
   }
   detection.num_matches = static_cast<int>(matches.size());
-  if (detection.num_matches < config_.loop_min_inliers) return false;
+  if (detection.num_matches < min_inliers) return false;
 
   const RansacResult ransac = ransacRigid(matches, intrinsics, config_.loop_inlier_threshold_px,
                                           config_.loop_ransac_iterations, rng_);
-  if (!ransac.success || ransac.num_inliers < config_.loop_min_inliers) return false;
+  if (!ransac.success || ransac.num_inliers < min_inliers) return false;
   const RefinementResult refined =
       refinePose(matches, ransac.inliers, intrinsics, ransac.T_ref_curr, RefinementOptions());
   if (!refined.success) return false;
@@ -137,11 +140,11 @@ bool LoopDetector::verify(const FeatureSet& query, const CameraIntrinsics& intri
     }
   }
   detection.num_inliers = inliers;
-  if (inliers < config_.loop_min_inliers) return false;
+  if (inliers < min_inliers) return false;
   detection.T_match_query = refined.T_ref_curr;
   Matrix6d covariance = refined.covariance;
-  for (int k = 0; k < 3; ++k) covariance(k, k) += kMinSigmaM * kMinSigmaM;
-  for (int k = 3; k < 6; ++k) covariance(k, k) += kMinSigmaRad * kMinSigmaRad;
+  for (int k = 0; k < 3; ++k) covariance(k, k) += min_sigma_m * min_sigma_m;
+  for (int k = 3; k < 6; ++k) covariance(k, k) += min_sigma_rad * min_sigma_rad;
   detection.information = covariance.inverse();
   detection.information = 0.5 * (detection.information + detection.information.transpose());
   detection.match_id = e.id;
@@ -199,7 +202,8 @@ LoopDetection LoopDetector::processKeyframe(const Keyframe& keyframe) {
     LoopDetection attempt = detection;
     attempt.score = candidate.score;
     const Entry& entry = entries_[static_cast<std::size_t>(candidate.entry)];
-    if (!verify(keyframe.features, keyframe.intrinsics, entry, attempt)) {
+    if (!verify(keyframe.features, keyframe.intrinsics, entry, attempt, config_.loop_min_inliers,
+                kMinSigmaM, kMinSigmaRad)) {
       if (!have_best && attempt.num_inliers > best.num_inliers) best = attempt;
       continue;
     }
@@ -252,14 +256,21 @@ LoopDetection LoopDetector::processKeyframe(const Keyframe& keyframe) {
 }
 
 LoopDetection LoopDetector::query(const FeatureSet& features, const CameraIntrinsics& intrinsics) {
+  return query(features, intrinsics, KeyframeFilter(), 0);
+}
+
+LoopDetection LoopDetector::query(const FeatureSet& features, const CameraIntrinsics& intrinsics,
+                                  const KeyframeFilter& allowed, int min_inliers) {
   const auto start = std::chrono::steady_clock::now();
   LoopDetection detection;
   if (!hasBinaryDescriptors(features) || vocabulary_ == nullptr || vocabulary_->empty()) {
     detection.status = LoopStatus::kUnsupportedDescriptors;
     return detection;
   }
+  if (min_inliers <= 0) min_inliers = config_.loop_min_inliers;
   const BowVector bow = vocabulary_->transform(features.descriptors);
-  std::vector<Candidate> candidates = retrieve(bow, entries_.size(), config_.loop_min_score);
+  std::vector<Candidate> candidates =
+      retrieve(bow, entries_.size(), config_.loop_min_score, allowed);
   detection.num_candidates = static_cast<int>(candidates.size());
   if (candidates.size() > static_cast<std::size_t>(config_.loop_max_candidates)) {
     candidates.resize(static_cast<std::size_t>(config_.loop_max_candidates));
@@ -269,16 +280,51 @@ LoopDetection LoopDetector::query(const FeatureSet& features, const CameraIntrin
   for (const Candidate& candidate : candidates) {
     LoopDetection attempt = detection;
     attempt.score = candidate.score;
-    if (verify(features, intrinsics, entries_[static_cast<std::size_t>(candidate.entry)],
-               attempt) &&
+    if (verify(features, intrinsics, entries_[static_cast<std::size_t>(candidate.entry)], attempt,
+               min_inliers, kMinSigmaM, kMinSigmaRad) &&
         (detection.match_id < 0 || attempt.num_inliers > detection.num_inliers)) {
       detection = attempt;
       detection.status = LoopStatus::kLoopFound;
+    } else if (detection.match_id < 0 && attempt.num_inliers > detection.num_inliers) {
+      detection.num_matches = attempt.num_matches;
+      detection.num_inliers = attempt.num_inliers;
     }
   }
   detection.time_ms =
       std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
   return detection;
+}
+
+std::vector<LoopDetection> LoopDetector::matchLocal(const Keyframe& keyframe,
+                                                    const KeyframeFilter& allowed) {
+  std::vector<LoopDetection> matches;
+  if (!hasBinaryDescriptors(keyframe.features) || vocabulary_ == nullptr ||
+      vocabulary_->empty() || entries_.empty()) {
+    return matches;
+  }
+  const BowVector bow = vocabulary_->transform(keyframe.features.descriptors);
+  std::vector<Candidate> candidates = retrieve(bow, entries_.size(), 0.0, allowed);
+  if (candidates.size() > static_cast<std::size_t>(config_.local_max_candidates)) {
+    candidates.resize(static_cast<std::size_t>(config_.local_max_candidates));
+  }
+  for (const Candidate& candidate : candidates) {
+    LoopDetection attempt;
+    attempt.query_id = keyframe.id;
+    attempt.score = candidate.score;
+    if (verify(keyframe.features, keyframe.intrinsics,
+               entries_[static_cast<std::size_t>(candidate.entry)], attempt,
+               config_.local_min_inliers, config_.local_min_sigma_m,
+               config_.local_min_sigma_rad)) {
+      attempt.status = LoopStatus::kLoopFound;
+      matches.push_back(attempt);
+      // Enough edges: the remaining candidates would only cost verification time.
+      if (matches.size() >= static_cast<std::size_t>(std::max(1, config_.local_edges))) break;
+    }
+  }
+  std::sort(matches.begin(), matches.end(), [](const LoopDetection& a, const LoopDetection& b) {
+    return a.num_inliers > b.num_inliers;
+  });
+  return matches;
 }
 
 }  // namespace slamd

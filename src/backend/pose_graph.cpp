@@ -139,7 +139,7 @@ void PoseGraph::setFixed(std::int64_t id, bool fixed) { fixed_[index_.at(id)] = 
 namespace {
 
 bool isRobust(const PoseGraphEdge& edge, const PoseGraphOptions& options) {
-  return edge.kind == EdgeKind::kLoop || options.robust_odometry_edges;
+  return edge.kind != EdgeKind::kOdometry || options.robust_odometry_edges;
 }
 
 }  // namespace

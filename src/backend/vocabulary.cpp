@@ -2,7 +2,10 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
+#include <fstream>
+#include <string>
 #include <istream>
 #include <limits>
 #include <map>
@@ -162,6 +165,8 @@ Vocabulary Vocabulary::train(const std::vector<cv::Mat>& image_descriptors, int 
     for (int r = 0; r < descriptors.rows; ++r) data.push_back(binaryDescriptorRow(descriptors, r));
   }
   if (data.empty()) return vocabulary;
+  vocabulary.branching_ = std::max(branching, 2);
+  vocabulary.depth_ = std::max(depth, 1);
   std::vector<int> members(data.size());
   for (std::size_t i = 0; i < data.size(); ++i) members[i] = static_cast<int>(i);
   vocabulary.nodes_.push_back(Node());
@@ -224,75 +229,192 @@ BowVector Vocabulary::transform(const cv::Mat& descriptors) const {
 
 namespace {
 
-constexpr char kMagic[8] = {'S', 'L', 'V', 'O', 'C', 'A', 'B', '1'};
+constexpr char kMagic[8] = {'S', 'L', 'A', 'M', 'D', 'V', 'O', 'C'};
+// Bounds that no vocabulary slamd trains comes near (32^6 words at most); they keep a corrupt
+// count from allocating gigabytes before the size check catches it.
+constexpr std::int64_t kMaxNodes = 50000000;
 
 template <typename T>
-void put(std::ostream& out, const T& value) {
-  out.write(reinterpret_cast<const char*>(&value), sizeof(T));
+void put(std::string& out, const T& value) {
+  out.append(reinterpret_cast<const char*>(&value), sizeof(T));
 }
 
-template <typename T>
-bool get(std::istream& in, T& value) {
-  return static_cast<bool>(in.read(reinterpret_cast<char*>(&value), sizeof(T)));
+// Reads values from a byte buffer, remembering whether it ran out.
+class Reader {
+ public:
+  explicit Reader(const std::string& bytes) : bytes_(bytes) {}
+  template <typename T>
+  bool get(T& value) {
+    if (bytes_.size() - position_ < sizeof(T)) return false;
+    std::memcpy(&value, bytes_.data() + position_, sizeof(T));
+    position_ += sizeof(T);
+    return true;
+  }
+  std::size_t remaining() const { return bytes_.size() - position_; }
+
+ private:
+  const std::string& bytes_;
+  std::size_t position_ = 0;
+};
+
+std::uint64_t fnv1a(const std::string& bytes) {
+  std::uint64_t hash = 14695981039346656037ull;
+  for (char c : bytes) {
+    hash ^= static_cast<std::uint8_t>(c);
+    hash *= 1099511628211ull;
+  }
+  return hash;
+}
+
+bool fail(std::string* error, const std::string& message) {
+  if (error != nullptr) *error = message;
+  return false;
 }
 
 }  // namespace
 
 void Vocabulary::write(std::ostream& out) const {
-  out.write(kMagic, sizeof(kMagic));
-  put(out, static_cast<std::int32_t>(nodes_.size()));
-  put(out, static_cast<std::int32_t>(num_words_));
+  std::string payload;
   for (const Node& node : nodes_) {
-    for (std::uint64_t w : node.centre) put(out, w);
-    put(out, static_cast<std::int32_t>(node.word));
-    put(out, static_cast<std::int32_t>(node.children.size()));
-    for (int child : node.children) put(out, static_cast<std::int32_t>(child));
+    for (std::uint64_t w : node.centre) put(payload, w);
+    put(payload, static_cast<std::int32_t>(node.word));
+    put(payload, static_cast<std::int32_t>(node.children.size()));
+    for (int child : node.children) put(payload, static_cast<std::int32_t>(child));
   }
-  for (double v : idf_) put(out, v);
+  for (double v : idf_) put(payload, v);
+  std::string header(kMagic, sizeof(kMagic));
+  put(header, kFileVersion);
+  put(header, static_cast<std::uint32_t>(branching_));
+  put(header, static_cast<std::uint32_t>(depth_));
+  put(header, static_cast<std::int64_t>(nodes_.size()));
+  put(header, static_cast<std::int64_t>(num_words_));
+  put(header, static_cast<std::uint64_t>(payload.size()));
+  put(payload, fnv1a(payload));
+  out.write(header.data(), static_cast<std::streamsize>(header.size()));
+  out.write(payload.data(), static_cast<std::streamsize>(payload.size()));
 }
 
-bool Vocabulary::read(std::istream& in) {
+bool Vocabulary::read(std::istream& in, std::string* error) {
   char magic[sizeof(kMagic)] = {};
   if (!in.read(magic, sizeof(magic)) || std::memcmp(magic, kMagic, sizeof(kMagic)) != 0) {
-    return false;
+    return fail(error, "not a slamd vocabulary (bad magic)");
   }
-  std::int32_t num_nodes = 0;
-  std::int32_t num_words = 0;
-  if (!get(in, num_nodes) || !get(in, num_words) || num_nodes < 0 || num_words < 0 ||
-      num_nodes > 100000000 || num_words > num_nodes) {
-    return false;
+  std::string header(sizeof(std::uint32_t) * 3 + sizeof(std::int64_t) * 2 + sizeof(std::uint64_t),
+                     '\0');
+  if (!in.read(header.data(), static_cast<std::streamsize>(header.size()))) {
+    return fail(error, "truncated header");
   }
+  Reader h(header);
+  std::uint32_t version = 0, branching = 0, depth = 0;
+  std::int64_t num_nodes = 0, num_words = 0;
+  std::uint64_t payload_size = 0;
+  h.get(version);
+  h.get(branching);
+  h.get(depth);
+  h.get(num_nodes);
+  h.get(num_words);
+  h.get(payload_size);
+  if (version != kFileVersion) {
+    return fail(error, "unsupported format version " + std::to_string(version) + " (expected " +
+                           std::to_string(kFileVersion) + ")");
+  }
+  if (num_nodes < 1 || num_nodes > kMaxNodes || num_words < 1 || num_words > num_nodes ||
+      branching < 2 || branching > 1024 || depth < 1 || depth > 64) {
+    return fail(error, "inconsistent header (nodes " + std::to_string(num_nodes) + ", words " +
+                           std::to_string(num_words) + ")");
+  }
+  // Each node takes at least 40 bytes, each word 8: the declared size must fit both.
+  const std::uint64_t min_size = static_cast<std::uint64_t>(num_nodes) * 40u +
+                                 static_cast<std::uint64_t>(num_words) * 8u;
+  const std::uint64_t max_size = min_size + static_cast<std::uint64_t>(num_nodes) * 4u;
+  if (payload_size < min_size || payload_size > max_size) {
+    return fail(error, "inconsistent payload size " + std::to_string(payload_size));
+  }
+  std::string payload(static_cast<std::size_t>(payload_size), '\0');
+  std::uint64_t checksum = 0;
+  if (!in.read(payload.data(), static_cast<std::streamsize>(payload.size())) ||
+      !in.read(reinterpret_cast<char*>(&checksum), sizeof(checksum))) {
+    return fail(error, "truncated (expected " + std::to_string(payload_size + 8) +
+                           " bytes after the header)");
+  }
+  if (fnv1a(payload) != checksum) return fail(error, "checksum mismatch (corrupt file)");
+
+  Reader r(payload);
   std::vector<Node> nodes(static_cast<std::size_t>(num_nodes));
+  std::vector<bool> has_parent(nodes.size(), false);
+  std::vector<bool> word_seen(static_cast<std::size_t>(num_words), false);
   for (std::size_t index = 0; index < nodes.size(); ++index) {
     Node& node = nodes[index];
     for (std::uint64_t& w : node.centre) {
-      if (!get(in, w)) return false;
+      if (!r.get(w)) return fail(error, "truncated node data");
     }
     std::int32_t word = 0;
     std::int32_t num_children = 0;
-    if (!get(in, word) || !get(in, num_children) || word < -1 || word >= num_words ||
-        num_children < 0 || num_children > num_nodes) {
-      return false;
+    if (!r.get(word) || !r.get(num_children)) return fail(error, "truncated node data");
+    if (word < -1 || word >= num_words || num_children < 0 || num_children > num_nodes) {
+      return fail(error, "invalid node " + std::to_string(index));
     }
     node.word = word;
     for (std::int32_t c = 0; c < num_children; ++c) {
       std::int32_t child = 0;
-      // Children always follow their parent, so the tree has no cycles.
-      if (!get(in, child) || child <= static_cast<std::int32_t>(index) || child >= num_nodes) {
-        return false;
+      if (!r.get(child)) return fail(error, "truncated node data");
+      // Children always follow their parent and have one parent: the nodes form a tree.
+      if (child <= static_cast<std::int32_t>(index) || child >= num_nodes ||
+          has_parent[static_cast<std::size_t>(child)]) {
+        return fail(error, "invalid child of node " + std::to_string(index));
       }
+      has_parent[static_cast<std::size_t>(child)] = true;
       node.children.push_back(child);
     }
-    if (node.children.empty() && node.word < 0) return false;
+    if (node.children.empty() == (node.word < 0)) {
+      return fail(error, "node " + std::to_string(index) + " is neither a leaf nor inner node");
+    }
+    if (node.word >= 0) {
+      if (word_seen[static_cast<std::size_t>(node.word)]) {
+        return fail(error, "word " + std::to_string(node.word) + " appears twice");
+      }
+      word_seen[static_cast<std::size_t>(node.word)] = true;
+    }
+  }
+  for (std::size_t index = 1; index < nodes.size(); ++index) {
+    if (!has_parent[index]) return fail(error, "node " + std::to_string(index) + " unreachable");
   }
   std::vector<double> idf(static_cast<std::size_t>(num_words));
   for (double& v : idf) {
-    if (!get(in, v)) return false;
+    if (!r.get(v)) return fail(error, "truncated idf weights");
+    if (!std::isfinite(v) || v < 0.0) return fail(error, "invalid idf weight");
   }
+  if (r.remaining() != 0) return fail(error, "trailing bytes in the payload");
   nodes_ = std::move(nodes);
   idf_ = std::move(idf);
-  num_words_ = num_words;
+  num_words_ = static_cast<int>(num_words);
+  branching_ = static_cast<int>(branching);
+  depth_ = static_cast<int>(depth);
   return true;
+}
+
+void Vocabulary::save(const std::string& path) const {
+  const std::string temporary = path + ".tmp";
+  {
+    std::ofstream out(temporary, std::ios::binary | std::ios::trunc);
+    if (!out) throw VocabularyError("vocabulary '" + path + "': cannot open " + temporary);
+    write(out);
+    out.flush();
+    if (!out) throw VocabularyError("vocabulary '" + path + "': write failed");
+  }
+  if (std::rename(temporary.c_str(), path.c_str()) != 0) {
+    std::remove(temporary.c_str());
+    throw VocabularyError("vocabulary '" + path + "': cannot rename " + temporary);
+  }
+}
+
+Vocabulary Vocabulary::load(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw VocabularyError("vocabulary '" + path + "': cannot open");
+  Vocabulary vocabulary;
+  std::string error;
+  if (!vocabulary.read(in, &error)) throw VocabularyError("vocabulary '" + path + "': " + error);
+  return vocabulary;
 }
 
 }  // namespace slamd

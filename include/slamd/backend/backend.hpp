@@ -21,9 +21,22 @@
 //
 // Odometry edges: consecutive keyframes of one tracking segment, measurement
 // T_prev_curr = T_world_prev^-1 * T_world_curr from the odometry poses, standard deviation
-// odometry_sigma_ratio * distance (+ 5 mm) per axis and odometry_sigma_rad per axis. A keyframe
-// starting a new segment (after LOST) is tied to the previous one by a very weak edge only, so a
-// later loop can place it.
+// odometry_sigma_ratio * distance (+ 5 mm) per axis and odometry_sigma_rad per axis, or the
+// covariance tracking measured when the caller passes it (addKeyframe's second argument).
+//
+// Local edges (backend.local_edges): each new keyframe is also matched against earlier keyframes
+// of the same map that look alike (recent ones included) and verified with RANSAC + refinement;
+// an edge whose relative pose agrees with the current graph estimate is added with the
+// refinement's information. The graph is then re-optimised (backend.optimize_every_keyframe),
+// warm-started from the previous solution, so each optimisation takes a few iterations.
+//
+// Relocalisation (backend.relocalization): a keyframe starting a new segment (after LOST) is tied
+// to the previous one by a very weak edge only, and matched against every keyframe of earlier
+// segments (LoopDetector::query, no recency exclusion or consistency). On a verified match a
+// strong edge joins the segment to the map, the graph is re-optimised and the update says
+// relocalized; T_world_odometry then carries the new segment's odometry into the map's world.
+// Until a match is found every later keyframe of the segment tries again. A segment's keyframes
+// make local edges only with keyframes of segments already joined to it.
 
 #include <cstdint>
 #include <memory>
@@ -43,6 +56,18 @@ struct BackendUpdate {
   LoopDetection loop;               ///< the loop search for this keyframe
   bool optimized = false;           ///< a loop was added and the graph re-optimised
   PoseGraphResult optimization;     ///< valid when optimized
+  int num_local_edges = 0;          ///< local (covisibility) edges added for this keyframe
+  int num_local_rejected = 0;       ///< verified local matches that disagreed with the graph
+  /// This keyframe's segment was joined to the map by a relocalisation now.
+  bool relocalized = false;
+  /// The relocalisation attempt of this keyframe (when attempted): match_id, inliers, status.
+  LoopDetection relocalization;
+  bool relocalization_attempted = false;
+  /// Attempts made for this keyframe's segment so far (this one included); 0 when the segment
+  /// needed none (the first segment, or already joined).
+  int relocalization_attempts = 0;
+  /// The keyframe's segment is not (yet) joined to the map of the first segment.
+  bool relocalization_pending = false;
   /// Every keyframe's corrected T_world_camera (metres), when optimized.
   std::vector<std::pair<std::int64_t, SE3>> corrected_poses;
   /// Correction from the odometry world to the corrected world (see the class comment).
@@ -57,22 +82,46 @@ class Backend {
   /// descriptors still joins the graph (with its odometry edge), it just cannot close loops.
   BackendUpdate addKeyframe(const KeyframePtr& keyframe);
 
+  /// As above, with the covariance tracking measured for the odometry step (order x y z rx ry rz,
+  /// metres^2 / radians^2, right perturbation): covariance of T_prev_curr between the previous
+  /// keyframe and this one. Used for the odometry edge instead of the fixed ratio (floored at
+  /// 1 mm / 0.05 degree). Ignored for the first keyframe of a segment.
+  BackendUpdate addKeyframe(const KeyframePtr& keyframe, const Matrix6d& covariance_prev_curr);
+
   /// Current (corrected) T_world_camera of a keyframe; the odometry pose before any loop.
   SE3 pose(std::int64_t keyframe_id) const { return graph_.pose(keyframe_id); }
   const PoseGraph& graph() const { return graph_; }
   const LoopDetector& loopDetector() const { return detector_; }
   LoopDetector& loopDetector() { return detector_; }
   int numLoops() const { return num_loops_; }
+  int numLocalEdges() const { return num_local_edges_; }
+  int numRelocalizations() const { return num_relocalizations_; }
+  /// The segment whose map `segment` has been joined to (the segment itself until then).
+  std::int64_t segmentRoot(std::int64_t segment) const;
 
  private:
+  struct KeyframeInfo {
+    std::int64_t segment = 0;
+    double path_length_m = 0.0;  ///< odometry path from the first keyframe of its segment
+  };
+
+  BackendUpdate add(const KeyframePtr& keyframe, const Matrix6d* covariance_prev_curr);
   Matrix6d odometryInformation(const SE3& T_prev_curr) const;
+  void addLocalEdges(const Keyframe& keyframe, BackendUpdate& update);
+  void tryRelocalization(const Keyframe& keyframe, BackendUpdate& update);
 
   BackendConfig config_;
   PoseGraphOptions options_;
   PoseGraph graph_;
   LoopDetector detector_;
   KeyframePtr previous_;  ///< the latest keyframe added
+  std::unordered_map<std::int64_t, KeyframeInfo> keyframes_;
+  std::unordered_map<std::int64_t, std::int64_t> segment_parent_;  ///< joined segments (union-find)
+  std::int64_t first_segment_ = 0;
+  int relocalization_attempts_ = 0;  ///< attempts of the latest segment
   int num_loops_ = 0;
+  int num_local_edges_ = 0;
+  int num_relocalizations_ = 0;
 };
 
 }  // namespace slamd

@@ -102,6 +102,57 @@ struct BackendConfig {
   /// travelled).
   double loop_max_drift_ratio = 0.1;
 
+  // --- Local (covisibility) edges -------------------------------------------------------------
+  /// backend.local_edges (int, default 6, range [0, 50]): geometric edges added from each new
+  /// keyframe to earlier keyframes of the same connected map that see the same place (BoW
+  /// retrieval over all stored keyframes, recent ones included, then RANSAC + refinement), on
+  /// top of the odometry edge. 0 disables them (loops only). They make the graph rigid in scenes
+  /// that are revisited constantly (a desk), where rare loops alone leave the drift.
+  int local_edges = 6;
+  /// backend.local_max_candidates (int, default 12, range [1, 200]): candidates verified per
+  /// keyframe for local edges (best BoW scores first).
+  int local_max_candidates = 12;
+  /// backend.local_min_inliers (int, default 30, range [6, 10000]): inliers after refinement for
+  /// a local edge.
+  int local_min_inliers = 30;
+  /// backend.local_max_discrepancy_m (double, default 0.15, range [0, 100], metres) and
+  /// backend.local_max_discrepancy_ratio (double, default 0.05, range [0, 10], metres per metre
+  /// travelled): a local edge is rejected when its translation disagrees with the current graph
+  /// estimate of the relative pose by more than this (plus the ratio times the path between the
+  /// two keyframes): the false-match protection of edges that need no consistency check.
+  double local_max_discrepancy_m = 0.15;
+  double local_max_discrepancy_ratio = 0.05;
+  /// backend.local_max_discrepancy_rad (double, default 0.2, range [0, 3.2], radians): the same
+  /// for the rotation.
+  double local_max_discrepancy_rad = 0.2;
+  /// backend.local_min_sigma_m (double, default 0.002, range [0, 1], metres) and
+  /// backend.local_min_sigma_rad (double, default 0.002, range [0, 1], radians): floor added (in
+  /// quadrature) to the refinement's standard deviations of a local edge.
+  double local_min_sigma_m = 0.002;
+  double local_min_sigma_rad = 0.002;
+  /// backend.optimize_every_keyframe (bool, default true): re-optimise after every keyframe that
+  /// brought a local edge (otherwise only after loops and relocalisations).
+  bool optimize_every_keyframe = true;
+  /// backend.local_max_iterations (int, default 10, range [1, 1000]): Levenberg-Marquardt
+  /// iterations of an optimisation brought only by local edges (warm-started from the previous
+  /// solution, it has little left to do); loops and relocalisations use max_iterations.
+  int local_max_iterations = 10;
+
+  // --- Relocalisation -------------------------------------------------------------------------
+  /// backend.relocalization (bool, default true): a keyframe that starts a new tracking segment
+  /// (after LOST) is matched against every keyframe of earlier segments (no recency exclusion,
+  /// no consistency); a verified match ties the segment back into the map with a strong edge.
+  /// Until one matches, each later keyframe of the segment tries again.
+  bool relocalization = true;
+  /// backend.relocalization_min_inliers (int, default 40, range [6, 10000]): inliers after
+  /// refinement for a relocalisation.
+  int relocalization_min_inliers = 40;
+
+  // --- Vocabulary -----------------------------------------------------------------------------
+  /// backend.vocabulary_file (string, default empty): vocabulary written by slamd-vocabulary;
+  /// empty = train one at start-up on slamd's synthetic room (about a second).
+  std::string vocabulary_file;
+
   /// Reads and validates backend.*; throws ConfigError.
   static BackendConfig load(Config& config);
 };

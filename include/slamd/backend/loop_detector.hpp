@@ -23,6 +23,7 @@
 // kUnsupportedDescriptors.
 
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <random>
 #include <unordered_map>
@@ -76,6 +77,22 @@ class LoopDetector {
   /// no recent-keyframe exclusion, no consistency, nothing stored. match_id < 0 when none.
   LoopDetection query(const FeatureSet& features, const CameraIntrinsics& intrinsics);
 
+  /// Which stored keyframes a search may return: (keyframe id, tracking segment) -> allowed.
+  using KeyframeFilter = std::function<bool(std::int64_t id, std::int64_t segment)>;
+
+  /// query() restricted to the stored keyframes `allowed` accepts (e.g. earlier tracking
+  /// segments), with its own minimum of inliers (0 = backend.loop_min_inliers).
+  LoopDetection query(const FeatureSet& features, const CameraIntrinsics& intrinsics,
+                      const KeyframeFilter& allowed, int min_inliers = 0);
+
+  /// Local (covisibility) matches of a keyframe not yet stored: the best BoW candidates among
+  /// the stored keyframes `allowed` accepts, recent ones included (backend.local_max_candidates
+  /// of them), each verified with RANSAC + refinement (backend.local_min_inliers). Every verified
+  /// one is returned (status kLoopFound, best inliers first) with T_match_query and an
+  /// information matrix from the refinement floored by backend.local_min_sigma_*. Nothing is
+  /// stored and no consistency is required: the caller checks each against its pose estimate.
+  std::vector<LoopDetection> matchLocal(const Keyframe& keyframe, const KeyframeFilter& allowed);
+
   std::size_t size() const { return entries_.size(); }
 
  private:
@@ -97,10 +114,12 @@ class LoopDetector {
   };
 
   std::vector<Candidate> retrieve(const BowVector& bow, std::size_t num_searchable,
-                                  double min_score) const;
+                                  double min_score,
+                                  const KeyframeFilter& allowed = KeyframeFilter()) const;
   /// Matches, RANSAC and refinement of the query against entry `e`; fills the geometric fields.
   bool verify(const FeatureSet& query, const CameraIntrinsics& intrinsics, const Entry& e,
-              LoopDetection& detection);
+              LoopDetection& detection, int min_inliers, double min_sigma_m,
+              double min_sigma_rad);
 
   BackendConfig config_;
   std::shared_ptr<const Vocabulary> vocabulary_;

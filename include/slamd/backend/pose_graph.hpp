@@ -28,7 +28,14 @@
 
 namespace slamd {
 
-enum class EdgeKind : std::int8_t { kOdometry = 0, kLoop = 1 };
+/// Odometry edges link consecutive keyframes of a tracking segment; every other kind is a
+/// place-recognition measurement and gets the robust kernel.
+enum class EdgeKind : std::int8_t {
+  kOdometry = 0,
+  kLoop = 1,            ///< a loop beyond the recent keyframes, confirmed by consistency
+  kLocal = 2,           ///< a covisibility edge to an earlier keyframe of the same map
+  kRelocalization = 3,  ///< ties a new tracking segment to the map
+};
 
 struct PoseGraphEdge {
   std::int64_t from_id = 0;  ///< node i

@@ -19,6 +19,9 @@
 #include <array>
 #include <cstdint>
 #include <iosfwd>
+#include <memory>
+#include <stdexcept>
+#include <string>
 #include <utility>
 #include <vector>
 
@@ -55,9 +58,24 @@ class Vocabulary {
   BowVector transform(const cv::Mat& descriptors) const;
   double idf(int word) const { return idf_[static_cast<std::size_t>(word)]; }
 
-  /// Binary serialisation (little-endian host layout); read returns false on malformed input.
+  int branching() const { return branching_; }
+  int depth() const { return depth_; }
+
+  /// Binary serialisation, format version kFileVersion (little-endian host layout): magic
+  /// "SLAMDVOC", version, branching, depth, node and word counts, payload size, the nodes
+  /// (centre, word, children), the idf weights, and an FNV-1a checksum of the payload.
   void write(std::ostream& out) const;
-  bool read(std::istream& in);
+  /// Reads what write() wrote; false (and *error says why: not a vocabulary, unsupported
+  /// version, truncated, checksum mismatch, inconsistent tree) on malformed input, leaving this
+  /// vocabulary unchanged. Never crashes on arbitrary bytes.
+  bool read(std::istream& in, std::string* error = nullptr);
+
+  /// write() to a file (written to FILE.tmp, then renamed); throws VocabularyError.
+  void save(const std::string& path) const;
+  /// read() from a file; throws VocabularyError naming the file and the problem.
+  static Vocabulary load(const std::string& path);
+
+  static constexpr std::uint32_t kFileVersion = 2;
 
  private:
   struct Node {
@@ -71,6 +89,27 @@ class Vocabulary {
   std::vector<Node> nodes_;  ///< nodes_[0] is the root
   std::vector<double> idf_;  ///< per word
   int num_words_ = 0;
+  int branching_ = 0;
+  int depth_ = 0;
 };
+
+/// A vocabulary file that cannot be read or written.
+class VocabularyError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+struct BackendConfig;
+
+/// Trains a vocabulary on ORB descriptors (tracking's default extractor) of `num_images` frames
+/// evenly spread over one of slamd's synthetic scenes (room, corridor, corridor_loop; default
+/// synthetic settings). Deterministic.
+Vocabulary trainVocabularyOnSyntheticScene(const std::string& scene, int branching, int depth,
+                                           int num_images = 20);
+
+/// The daemon's vocabulary: loaded from backend.vocabulary_file when set (throws
+/// VocabularyError when it cannot be read), else trained on the synthetic room with
+/// backend.vocabulary_branching / vocabulary_depth. Logs which, and how long it took.
+std::shared_ptr<const Vocabulary> loadOrTrainVocabulary(const BackendConfig& config);
 
 }  // namespace slamd
