@@ -43,7 +43,8 @@ std::string renderStatus(const slamd::status_t& status, std::uint64_t malformed)
   out << "tracking: "
       << slamd::trackingStateName(static_cast<slamd::TrackingState>(status.tracking_state))
       << "   map: " << status.map_occupied_voxels << " occupied / " << status.map_total_voxels
-      << " voxels\n";
+      << " voxels   back end: " << status.num_keyframes << " keyframes, " << status.num_loops
+      << " loops, " << status.num_relocalizations << " relocalisations\n";
   if (!status.message.empty()) out << "note: " << status.message << "\n";
   if (malformed) out << "(" << malformed << " malformed status messages ignored)\n";
   return out.str();

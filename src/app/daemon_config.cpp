@@ -17,11 +17,13 @@ DaemonConfig DaemonConfig::load(Config& config) {
   c.filter_queue = config.getInt("daemon.filter_queue", c.filter_queue, 1, 1000);
   c.publish_queue = config.getInt("daemon.publish_queue", c.publish_queue, 1, 1000);
   c.mapping_queue = config.getInt("daemon.mapping_queue", c.mapping_queue, 1, 1000);
+  c.backend_queue = config.getInt("daemon.backend_queue", c.backend_queue, 1, 100000);
   c.publish_frames = config.getBool("daemon.publish_frames", c.publish_frames);
   c.mapping_enabled = config.getBool("mapping.enabled", c.mapping_enabled);
   c.map_keyframes_only = config.getBool("mapping.keyframes_only", c.map_keyframes_only);
   c.map_save_path = config.getString("daemon.map_save_path", c.map_save_path);
   c.mapping_nice = config.getInt("daemon.mapping_nice", c.mapping_nice, 0, 19);
+  c.backend_nice = config.getInt("daemon.backend_nice", c.backend_nice, 0, 19);
   c.opencv_threads = config.getInt("daemon.opencv_threads", c.opencv_threads, 0, 64);
   c.world_frame = config.getString("daemon.world_frame", c.world_frame);
   c.camera_frame = config.getString("daemon.camera_frame", c.camera_frame);

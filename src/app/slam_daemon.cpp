@@ -1,12 +1,15 @@
 #include "slamd/app/slam_daemon.hpp"
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <fstream>
 #include <mutex>
+#include <unordered_map>
 
 #include <opencv2/core.hpp>
 
+#include "slamd/app/backend_stage.hpp"
 #include "slamd/app/daemon_config.hpp"
 #include "slamd/app/daemon_messages.hpp"
 #include "slamd/app/pose_estimator.hpp"
@@ -38,6 +41,38 @@ struct MapRequest {
   Kind kind = Kind::kSave;
   std::string path;  ///< kSave: .bt or .ot
 };
+
+/// The back end's correction as the publish thread needs it.
+struct PoseCorrection {
+  SE3 T_world_uncorrected = SE3::Identity();
+  bool relocalized = false;  ///< mark the next published pose TRACKING_RELOCALIZED
+};
+
+/// What the mapping thread keeps between frames.
+struct MappingThreadState {
+  std::uint64_t reset_seen = 0;
+  std::int64_t next_occupancy_count_ns = 0;
+  /// The back end's correction: uncorrected (filter) world -> corrected world.
+  SE3 T_world_uncorrected = SE3::Identity();
+  /// Pose each kept keyframe cloud is in the map at (corrected world).
+  std::unordered_map<std::int64_t, SE3> keyframe_map_poses;
+};
+
+/// Largest distance a keyframe moves between two sets of poses: translation plus the rotation
+/// angle times a 2 m lever arm (a point 2 m in front of the camera), metres.
+double largestKeyframeShiftM(const std::unordered_map<std::int64_t, SE3>& before,
+                             const std::vector<std::pair<std::int64_t, SE3>>& after) {
+  constexpr double kLeverArmM = 2.0;
+  double largest_m = 0.0;
+  for (const auto& [id, T_after] : after) {
+    const auto it = before.find(id);
+    if (it == before.end()) continue;
+    const SE3 delta = it->second.inverse() * T_after;
+    const double angle_rad = Eigen::AngleAxisd(delta.linear()).angle();
+    largest_m = std::max(largest_m, delta.translation().norm() + kLeverArmM * angle_rad);
+  }
+  return largest_m;
+}
 }  // namespace
 
 struct SlamDaemon::Impl {
@@ -48,12 +83,22 @@ struct SlamDaemon::Impl {
   TrackingConfig tracking_config;
   FilterConfig filter_config;
   MappingConfig mapping_config;
+  BackendConfig backend_config;
   LcmFramePublisherConfig frame_publisher_config;
   std::unique_ptr<FrameSource> source;
   /// Owned by the mapping thread while the pipeline runs, by the control thread after it stopped.
   std::unique_ptr<Mapper> mapper;
   /// Control loop (producer) -> mapping thread (consumer).
   SpscQueue<MapRequest> map_requests{16};
+  /// Owned by the back-end thread while the pipeline runs, by the control thread after it stopped.
+  std::unique_ptr<BackendStage> backend;
+  /// Back-end thread (producer) -> publish thread and mapping thread (consumers): each takes the
+  /// newest correction it finds.
+  SpscQueue<PoseCorrection> publish_corrections{64};
+  SpscQueue<BackendCorrection> mapping_corrections{64};
+  std::atomic<std::int32_t> backend_keyframes{0};
+  std::atomic<std::int32_t> backend_loops{0};
+  std::atomic<std::int32_t> backend_relocalizations{0};
   std::atomic<std::int64_t> map_leaf_voxels{0};
   std::atomic<std::int64_t> map_occupied_voxels{0};
 
@@ -91,8 +136,18 @@ struct SlamDaemon::Impl {
     tracking_config = TrackingConfig::load(config);
     filter_config = FilterConfig::load(config);
     mapping_config = MappingConfig::load(config);
+    backend_config = BackendConfig::load(config);
     if (daemon.publish_frames) frame_publisher_config = LcmFramePublisherConfig::load(config);
     if (daemon.mapping_enabled) mapper = std::make_unique<Mapper>(mapping_config);
+    if (backend_config.enabled) {
+      std::shared_ptr<const Vocabulary> vocabulary;
+      try {
+        vocabulary = loadOrTrainVocabulary(backend_config);
+      } catch (const VocabularyError& e) {
+        throw ConfigError(std::string("backend.vocabulary_file: ") + e.what());
+      }
+      backend = std::make_unique<BackendStage>(backend_config, std::move(vocabulary));
+    }
     // The source reads its own sections (camera.*, capture.*, synthetic.*) now, so that every
     // configuration error surfaces before anything starts.
     source = createFrameSource(daemon.source, config);
@@ -102,8 +157,10 @@ struct SlamDaemon::Impl {
   void handleCommands(ShutdownSignals& signals);
   void publishStatus(LcmBus& bus, StatusBuilder& builder, Pipeline& pipeline, const std::string& note);
   int writeOutputs();
-  void runMappingStep(LcmBus& bus, const EstimatedPacket& packet, std::uint64_t& reset_seen,
-                      std::int64_t& next_occupancy_count_ns);
+  void runMappingStep(LcmBus& bus, const EstimatedPacket& packet, MappingThreadState& state);
+  void applyMapCorrections(MappingThreadState& state);
+  void runBackendStep(LcmBus& bus, const EstimatedPacket& packet, std::uint64_t& reset_seen);
+  void finishBackend();
   void serveMapRequest(LcmBus& bus, const MapRequest& request);
   void publishMapOutputs(LcmBus& bus, const MapperOutputs& outputs);
   void writeMetrics(const std::vector<StageStats>& stats, const LatencySummary& end_to_end_latency);
@@ -176,6 +233,9 @@ void SlamDaemon::Impl::publishStatus(LcmBus& bus, StatusBuilder& builder, Pipeli
   extras.tracking_state = static_cast<TrackingState>(tracking_state.load(std::memory_order_relaxed));
   extras.map_occupied_voxels = map_occupied_voxels.load(std::memory_order_relaxed);
   extras.map_total_voxels = map_leaf_voxels.load(std::memory_order_relaxed);
+  extras.num_keyframes = backend_keyframes.load(std::memory_order_relaxed);
+  extras.num_loops = backend_loops.load(std::memory_order_relaxed);
+  extras.num_relocalizations = backend_relocalizations.load(std::memory_order_relaxed);
   extras.message = note;
   const std::uint64_t malformed = bus.malformedTotal();
   if (malformed > 0) {
@@ -209,7 +269,10 @@ int SlamDaemon::Impl::run(ShutdownSignals& signals) {
                        << "), publish, mapping ("
                        << (mapper ? (daemon.map_keyframes_only ? "keyframes" : "every frame")
                                   : "off")
-                       << "); not built yet: back end (issue 10)";
+                       << "), back end ("
+                       << (backend ? "loop closing, relocalisation, pose graph"
+                                   : "off: backend.enabled is false")
+                       << ")";
 
   std::unique_ptr<LcmBus> bus;
   try {
@@ -303,12 +366,35 @@ int SlamDaemon::Impl::run(ShutdownSignals& signals) {
         return estimator.process(std::move(packet));
       });
 
+  SE3 publish_correction = SE3::Identity();  // owned by the publish thread
+  bool publish_corrected = false;
+  bool publish_relocalized = false;
+  std::uint64_t publish_reset_seen = 0;
   pipeline.addSink<EstimatedPacket>(
       "publish", estimated,
       {static_cast<std::size_t>(daemon.publish_queue), EdgePolicy::kBackpressure},
       [&](EstimatedPacket packet) {
+        const auto generation = reset_generation.load(std::memory_order_acquire);
+        if (generation != publish_reset_seen) {
+          publish_correction = SE3::Identity();
+          publish_corrected = false;
+          publish_reset_seen = generation;
+        }
+        while (auto correction = publish_corrections.tryPop()) {
+          publish_correction = correction->T_world_uncorrected;
+          publish_relocalized = publish_relocalized || correction->relocalized;
+          publish_corrected = true;
+        }
         if (!packet.frame || !packet.odometry) return;
         PoseEstimate pose = packet.pose;
+        if (publish_corrected) {
+          pose = transformedPose(pose, publish_correction);
+          pose.source = PoseSource::kOptimized;
+        }
+        if (publish_relocalized && pose.tracking_state == TrackingState::kOk) {
+          pose.tracking_state = TrackingState::kRelocalized;
+          publish_relocalized = false;
+        }
         pose.parent_frame = daemon.world_frame;
         pose.child_frame = daemon.camera_frame;
         bus->publishMessage(channels.pose, toPoseMessage(pose));
@@ -324,16 +410,23 @@ int SlamDaemon::Impl::run(ShutdownSignals& signals) {
         }
       });
 
-  std::uint64_t mapping_reset_seen = 0;
-  std::int64_t next_occupancy_count_ns = 0;
+  MappingThreadState mapping_state;
   if (mapper) {
     pipeline.addSink<EstimatedPacket>(
         "mapping", estimated,
         {static_cast<std::size_t>(daemon.mapping_queue),
          live ? EdgePolicy::kDrainToNewest : EdgePolicy::kBackpressure},
-        [&](EstimatedPacket packet) { runMappingStep(*bus, packet, mapping_reset_seen,
-                                                     next_occupancy_count_ns); });
+        [&](EstimatedPacket packet) { runMappingStep(*bus, packet, mapping_state); });
     pipeline.setStageNice("mapping", daemon.mapping_nice);
+  }
+
+  std::uint64_t backend_reset_seen = 0;
+  if (backend) {
+    pipeline.addSink<EstimatedPacket>(
+        "backend", estimated,
+        {static_cast<std::size_t>(daemon.backend_queue), EdgePolicy::kBackpressure},
+        [&](EstimatedPacket packet) { runBackendStep(*bus, packet, backend_reset_seen); });
+    pipeline.setStageNice("backend", daemon.backend_nice);
   }
 
   StatusBuilder status_builder;
@@ -371,9 +464,15 @@ int SlamDaemon::Impl::run(ShutdownSignals& signals) {
 
   // Summary (the pipeline's threads are joined: their counters are final).
   const auto stats = pipeline.stats();
-  summary.frames_captured = stats[0].processed;
-  summary.frames_tracked = stats[1].processed;
-  summary.poses_published = stats[3].processed;
+  auto processed = [&stats](const std::string& stage) -> std::uint64_t {
+    for (const auto& s : stats) {
+      if (s.name == stage) return s.processed;
+    }
+    return 0;
+  };
+  summary.frames_captured = processed("capture");
+  summary.frames_tracked = processed("tracking");
+  summary.poses_published = processed("publish");
   if (mapper) summary.frames_mapped = static_cast<std::uint64_t>(mapper->stats().frames_integrated);
   // The mapping thread has stopped: map requests that arrived during the drain are served here.
   while (auto request = map_requests.tryPop()) serveMapRequest(*bus, *request);
@@ -407,6 +506,7 @@ int SlamDaemon::Impl::run(ShutdownSignals& signals) {
                        << latency.p50_ms << " ms, p95 " << latency.p95_ms << " ms, p99 "
                        << latency.p99_ms << " ms";
   if (!daemon.metrics_out.empty()) writeMetrics(stats, latency);
+  if (backend) finishBackend();
   return writeOutputs();
 }
 
@@ -468,14 +568,34 @@ void SlamDaemon::Impl::serveMapRequest(LcmBus& bus, const MapRequest& request) {
   }
 }
 
-void SlamDaemon::Impl::runMappingStep(LcmBus& bus, const EstimatedPacket& packet,
-                                      std::uint64_t& reset_seen,
-                                      std::int64_t& next_occupancy_count_ns) {
-  const auto generation = reset_generation.load(std::memory_order_acquire);
-  if (generation != reset_seen) {
-    mapper->reset();
-    reset_seen = generation;
+void SlamDaemon::Impl::applyMapCorrections(MappingThreadState& state) {
+  std::optional<BackendCorrection> newest;
+  while (auto correction = mapping_corrections.tryPop()) newest = std::move(correction);
+  if (!newest) return;
+  state.T_world_uncorrected = newest->T_world_uncorrected;
+  // Re-integrating every keyframe cloud costs about one frame's integration per keyframe: only
+  // worth it when the correction moves the map by more than half a voxel.
+  const double shift_m = largestKeyframeShiftM(state.keyframe_map_poses, newest->keyframe_poses);
+  if (shift_m < 0.5 * mapping_config.resolution_m) return;
+  const RebuildResult rebuilt = mapper->rebuild(newest->keyframe_poses);
+  for (const auto& [id, T_world_keyframe] : newest->keyframe_poses) {
+    auto it = state.keyframe_map_poses.find(id);
+    if (it != state.keyframe_map_poses.end()) it->second = T_world_keyframe;
   }
+  SLAMD_LOG_INFO(kLog) << "map rebuilt from " << rebuilt.keyframes_integrated
+                       << " keyframe clouds after a correction of up to " << shift_m << " m";
+}
+
+void SlamDaemon::Impl::runMappingStep(LcmBus& bus, const EstimatedPacket& packet,
+                                      MappingThreadState& state) {
+  const auto generation = reset_generation.load(std::memory_order_acquire);
+  if (generation != state.reset_seen) {
+    mapper->reset();
+    state.keyframe_map_poses.clear();
+    state.T_world_uncorrected = SE3::Identity();
+    state.reset_seen = generation;
+  }
+  applyMapCorrections(state);
   while (auto request = map_requests.tryPop()) serveMapRequest(bus, *request);
   if (packet.frame && packet.odometry &&
       packet.pose.tracking_state != TrackingState::kLost &&
@@ -485,8 +605,11 @@ void SlamDaemon::Impl::runMappingStep(LcmBus& bus, const EstimatedPacket& packet
     if (packet.odometry->is_keyframe && packet.odometry->keyframe) {
       keyframe_id = packet.odometry->keyframe->id;
     }
-    const IntegrationResult result =
-        mapper->integrate(*packet.frame, packet.pose.T_world_camera, keyframe_id);
+    const SE3 T_world_camera = state.T_world_uncorrected * packet.pose.T_world_camera;
+    const IntegrationResult result = mapper->integrate(*packet.frame, T_world_camera, keyframe_id);
+    if (result.keyframe_cloud_kept && keyframe_id) {
+      state.keyframe_map_poses[*keyframe_id] = T_world_camera;
+    }
     if (result.status == IntegrationStatus::kBadFrame ||
         result.status == IntegrationStatus::kBadPose) {
       // The pipeline counts a thrown error against this stage and carries on.
@@ -497,7 +620,7 @@ void SlamDaemon::Impl::runMappingStep(LcmBus& bus, const EstimatedPacket& packet
   map_leaf_voxels.store(static_cast<std::int64_t>(mapper->numLeafNodes()),
                         std::memory_order_relaxed);
   // Counting occupied voxels walks the tree: once a second is plenty for the status channel.
-  if (steadyNowNs() >= next_occupancy_count_ns) {
+  if (steadyNowNs() >= state.next_occupancy_count_ns) {
     auto count_occupied = [](const auto* tree) {
       std::int64_t occupied = 0;
       for (auto it = tree->begin_leafs(); it != tree->end_leafs(); ++it) {
@@ -508,7 +631,59 @@ void SlamDaemon::Impl::runMappingStep(LcmBus& bus, const EstimatedPacket& packet
     map_occupied_voxels.store(mapper->hasColor() ? count_occupied(mapper->colorOcTree())
                                                  : count_occupied(mapper->ocTree()),
                               std::memory_order_relaxed);
-    next_occupancy_count_ns = steadyNowNs() + 1'000'000'000;
+    state.next_occupancy_count_ns = steadyNowNs() + 1'000'000'000;
+  }
+}
+
+void SlamDaemon::Impl::runBackendStep(LcmBus& bus, const EstimatedPacket& packet,
+                                      std::uint64_t& reset_seen) {
+  const auto generation = reset_generation.load(std::memory_order_acquire);
+  if (generation != reset_seen) {
+    backend->reset();
+    reset_seen = generation;
+  }
+  std::optional<BackendCorrection> correction = backend->process(packet);
+  const BackendStageStats& stats = backend->stats();
+  backend_keyframes.store(static_cast<std::int32_t>(stats.keyframes), std::memory_order_relaxed);
+  backend_loops.store(static_cast<std::int32_t>(stats.loops), std::memory_order_relaxed);
+  backend_relocalizations.store(static_cast<std::int32_t>(stats.relocalizations),
+                                std::memory_order_relaxed);
+  if (!correction) return;
+  correction->trajectory.frame_id = daemon.world_frame;
+  bus.publishMessage(channels.keyframes, toKeyframeTrajectoryMessage(correction->trajectory));
+  if (!publish_corrections.tryPush(
+          PoseCorrection{correction->T_world_uncorrected, correction->relocalized})) {
+    // Cannot happen while the publish thread keeps up (it drains on every frame); if it does,
+    // the next correction replaces this one anyway.
+    SLAMD_LOG_WARN(kLog) << "pose correction not handed to the publish thread: queue full";
+  }
+  if (mapper && !mapping_corrections.tryPush(std::move(*correction))) {
+    SLAMD_LOG_WARN(kLog) << "map correction not handed to the mapping thread: queue full";
+  }
+}
+
+void SlamDaemon::Impl::finishBackend() {
+  const BackendStageStats& stats = backend->stats();
+  summary.keyframes = stats.keyframes;
+  summary.loops = stats.loops;
+  summary.relocalizations = stats.relocalizations;
+  summary.optimizations = stats.optimizations;
+  summary.max_optimization_ms = stats.max_optimization_ms;
+  SLAMD_LOG_INFO(kLog) << "back end: " << stats.keyframes << " keyframes, " << stats.loops
+                       << " loops, " << stats.relocalizations << " relocalisations, "
+                       << stats.optimizations << " optimisations (longest "
+                       << stats.max_optimization_ms << " ms)";
+  // The written trajectory and map take the final optimised poses, including corrections that
+  // arrived after the publish and mapping threads had finished.
+  trajectory = backend->optimizedTrajectory();
+  if (mapper && stats.optimizations > 0) {
+    std::vector<std::pair<std::int64_t, SE3>> keyframe_poses;
+    for (const std::int64_t id : backend->backend().graph().nodeIds()) {
+      keyframe_poses.emplace_back(id, backend->backend().pose(id));
+    }
+    const RebuildResult rebuilt = mapper->rebuild(keyframe_poses);
+    SLAMD_LOG_INFO(kLog) << "final map rebuilt from " << rebuilt.keyframes_integrated
+                         << " keyframe clouds at their optimised poses";
   }
 }
 

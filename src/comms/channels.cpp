@@ -22,6 +22,7 @@ ChannelConfig ChannelConfig::load(Config& config) {
   c.vanishing_point = channelName(config, "vanishing_point", c.vanishing_point);
   c.map_update = channelName(config, "map_update", c.map_update);
   c.map = channelName(config, "map", c.map);
+  c.keyframes = channelName(config, "keyframes", c.keyframes);
   c.status = channelName(config, "status", c.status);
   c.command = channelName(config, "command", c.command);
   return c;

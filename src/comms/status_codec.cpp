@@ -62,6 +62,9 @@ slamd::status_t StatusBuilder::build(Utime now_utime, std::int64_t now_steady_ns
   status.tracking_state = static_cast<int8_t>(extras.tracking_state);
   status.map_occupied_voxels = extras.map_occupied_voxels;
   status.map_total_voxels = extras.map_total_voxels;
+  status.num_keyframes = extras.num_keyframes;
+  status.num_loops = extras.num_loops;
+  status.num_relocalizations = extras.num_relocalizations;
   status.message = extras.message;
   previous_steady_ns_ = now_steady_ns;
   return status;

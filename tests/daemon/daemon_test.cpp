@@ -10,35 +10,11 @@
 #include "slamd/common/log.hpp"
 #include "slamd/common/program_options.hpp"
 #include "slamd/common/trajectory.hpp"
+#include "daemon_fixture.hpp"
 #include "test_data.hpp"
 
 namespace slamd {
 namespace {
-
-class DaemonInProcess : public ::testing::Test {
- protected:
-  void SetUp() override {
-    setLogLevel(LogLevel::kWarn);
-    dir_ = test::makeTempDir("daemon");
-  }
-  void TearDown() override {
-    setLogLevel(LogLevel::kInfo);
-    std::filesystem::remove_all(dir_);
-  }
-
-  Config smallSyntheticConfig(int frames) {
-    Config config = Config::fromFile(std::string(SLAMD_SOURCE_DIR) + "/config/synthetic.yaml");
-    for (const char* assignment :
-         {"camera.width=320", "camera.height=240", "camera.fx=262.5", "camera.fy=262.5",
-          "camera.cx=159.5", "camera.cy=119.5", "lcm.url=memq://"}) {
-      config.applyOverride(assignment);
-    }
-    config.set("synthetic.frames", std::to_string(frames));
-    return config;
-  }
-
-  std::filesystem::path dir_;
-};
 
 TEST_F(DaemonInProcess, ProcessesEveryFrameOfASequenceAndWritesOutputs) {
   Config config = smallSyntheticConfig(40);
@@ -92,6 +68,29 @@ TEST_F(DaemonInProcess, ShutdownRequestDrainsQueuedFramesAndStillWritesOutputs) 
   EXPECT_EQ(summary.poses_published, summary.frames_captured);
   EXPECT_EQ(summary.drops, 0u);
   EXPECT_EQ(readTumTrajectory(overrides.trajectory_out).size(), summary.poses_published);
+  EXPECT_TRUE(std::filesystem::exists(overrides.map_out));
+}
+
+TEST_F(DaemonInProcess, BackEndThreadRunsAlongsideTheOtherStages) {
+  Config config = smallSyntheticConfig(60);
+  config.set("backend.enabled", "true");
+  // A small vocabulary: trained in a fraction of the time (this test also runs under TSan).
+  config.set("backend.vocabulary_depth", "2");
+  DaemonOverrides overrides;
+  overrides.source = "synthetic:room";
+  overrides.trajectory_out = (dir_ / "trajectory.txt").string();
+  overrides.map_out = (dir_ / "map.bt").string();
+  ShutdownSignals signals;
+  SlamDaemon daemon(config, overrides);
+  ASSERT_EQ(daemon.run(signals), kExitOk);
+  const DaemonSummary& summary = daemon.summary();
+  EXPECT_EQ(summary.poses_published, 60u);
+  EXPECT_EQ(summary.drops, 0u);
+  EXPECT_EQ(summary.errors, 0u);
+  EXPECT_GE(summary.keyframes, 2);
+  // The trajectory written at the end is the back end's: every tracked frame, at its keyframe's
+  // optimised pose.
+  EXPECT_EQ(readTumTrajectory(overrides.trajectory_out).size(), 60u);
   EXPECT_TRUE(std::filesystem::exists(overrides.map_out));
 }
 

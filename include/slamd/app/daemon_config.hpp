@@ -42,6 +42,10 @@ struct DaemonConfig {
   /// daemon.mapping_queue (int, default 2, 1..1000): frames waiting for mapping; live runs skip to
   /// the newest (the map only needs recent views), datasets played as fast as possible wait.
   int mapping_queue = 2;
+  /// daemon.backend_queue (int, default 600, 1..100000): filtered frames waiting for the back
+  /// end (never dropped: a lost keyframe would break the graph). The back end only does real work
+  /// on keyframes, but a long optimisation must not hold up the filter: the queue absorbs it.
+  int backend_queue = 600;
   /// daemon.publish_frames (bool, default false): republish every processed frame (channel and
   /// encodings: capture.publish.*), so lcm-logger captures the input and a log can be replayed
   /// into slamd.
@@ -57,6 +61,9 @@ struct DaemonConfig {
   /// daemon.mapping_nice (int, default 10, 0..19): niceness of the mapping thread. Mapping is off
   /// the capture-to-pose path, so it gets the CPU the latency-critical stages leave.
   int mapping_nice = 10;
+  /// daemon.backend_nice (int, default 5, 0..19): niceness of the back-end thread (loop closing
+  /// and pose-graph optimisation are off the capture-to-pose path).
+  int backend_nice = 5;
   /// daemon.opencv_threads (int, default 0, 0..64): OpenCV's own worker threads. 0 runs every
   /// OpenCV call on the stage thread that makes it: the pipeline already keeps the cores busy
   /// with one thread per stage, and a hidden pool would compete with them for the same cores.

@@ -41,6 +41,12 @@ struct DaemonSummary {
   std::uint64_t drops = 0;
   std::uint64_t errors = 0;
   std::uint64_t malformed_commands = 0;
+  // Back end (zero when backend.enabled is false).
+  std::int64_t keyframes = 0;
+  std::int64_t loops = 0;
+  std::int64_t relocalizations = 0;
+  std::int64_t optimizations = 0;
+  double max_optimization_ms = 0.0;
   double duration_s = 0.0;
   double end_to_end_p50_ms = 0.0;
   double end_to_end_p95_ms = 0.0;

@@ -39,4 +39,10 @@ struct PoseEstimate {
   PoseSource source = PoseSource::kOdometry;
 };
 
+/// The same pose expressed in another world frame: T_new_old * T_world_camera, e.g. the back end's
+/// loop-closure correction applied to a filtered pose. The translation covariance and the linear
+/// velocity (world frame) rotate with the frame; the rotation covariance and angular velocity
+/// (camera frame) do not change.
+PoseEstimate transformedPose(const PoseEstimate& pose, const SE3& T_new_old);
+
 }  // namespace slamd

@@ -16,6 +16,7 @@ struct ChannelConfig {
   std::string vanishing_point = "SLAMD_VP";       ///< channels.vanishing_point
   std::string map_update = "SLAMD_MAP_UPDATE";    ///< channels.map_update
   std::string map = "SLAMD_MAP";                  ///< channels.map: full map
+  std::string keyframes = "SLAMD_KEYFRAMES";      ///< channels.keyframes: optimised keyframes
   std::string status = "SLAMD_STATUS";            ///< channels.status: 1 Hz
   std::string command = "SLAMD_COMMAND";          ///< channels.command: slamd.command_t in
   // Republished frames go to capture.publish.channel (LcmFramePublisherConfig).

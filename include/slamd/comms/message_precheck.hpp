@@ -14,6 +14,7 @@
 
 #include "bot_core/pose_t.hpp"
 #include "kinect/frame_msg_t.hpp"
+#include "slamd/keyframe_trajectory_t.hpp"
 #include "slamd/rgbd_frame_t.hpp"
 #include "slamd/status_t.hpp"
 #include "slamd/voxel_map_t.hpp"
@@ -116,6 +117,18 @@ struct MessagePrecheck<slamd::status_t> {
     std::int32_t count = 0;
     // hash, utime, num_stages; each stage_status_t is at least a 4-byte name length + 76 bytes
     return w.skip(8 + 8) && w.readCount(count, 4 + 5 * 8 + 2 * 4 + 3 * 8);
+  }
+};
+
+template <>
+struct MessagePrecheck<slamd::keyframe_trajectory_t> {
+  static bool plausible(const void* data, std::size_t size) {
+    LcmFieldWalker w(data, size);
+    std::int32_t count = 0;
+    // hash, utime, sequence, frame_id, correction (3 + 4 doubles), num_loops,
+    // num_relocalizations, optimization_ms, num_keyframes of 80-byte keyframe_pose_t
+    return w.skip(8 + 8 + 8) && w.skipString() && w.skip(7 * 8 + 4 + 4 + 4) &&
+           w.readCount(count, 3 * 8 + 7 * 8);
   }
 };
 

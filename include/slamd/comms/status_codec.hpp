@@ -26,6 +26,9 @@ struct StatusExtras {
   TrackingState tracking_state = TrackingState::kNotInitialized;
   std::int64_t map_occupied_voxels = 0;
   std::int64_t map_total_voxels = 0;
+  std::int32_t num_keyframes = 0;
+  std::int32_t num_loops = 0;
+  std::int32_t num_relocalizations = 0;
   std::string message;
 };
 

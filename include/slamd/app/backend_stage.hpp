@@ -1,0 +1,88 @@
+#pragma once
+// BackendStage: the daemon's back-end thread step. It sees every filtered frame; keyframes go to
+// the Backend (loop closing, relocalisation, pose-graph optimisation) with the filter's pose, so
+// the graph lives in the frame the filter integrates in (the "uncorrected world"). Each
+// optimisation becomes a BackendCorrection: the transform from the uncorrected world to the
+// corrected one (the publisher applies it to every later pose, like ROS's map -> odom), the
+// corrected keyframe poses (the mapper rebuilds the map from its keyframe clouds) and the
+// optimised keyframe trajectory (published on SLAMD_KEYFRAMES).
+//
+// Every tracked frame is remembered as (keyframe, pose relative to it), so that at the end the
+// whole trajectory can be written at its optimised poses, not only the keyframes.
+//
+// No threads inside; owned by the back-end thread, then by the control thread after the pipeline
+// stopped. process() never throws on bad data.
+
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <utility>
+#include <vector>
+
+#include "slamd/app/packets.hpp"
+#include "slamd/backend/backend.hpp"
+#include "slamd/common/trajectory.hpp"
+#include "slamd/comms/pose_codec.hpp"
+
+namespace slamd {
+
+/// What one pose-graph optimisation changes downstream.
+struct BackendCorrection {
+  /// Uncorrected world (filter) -> corrected world, for every pose after this keyframe.
+  SE3 T_world_uncorrected = SE3::Identity();
+  /// Every keyframe's optimised T_world_camera, for Mapper::rebuild().
+  std::vector<std::pair<std::int64_t, SE3>> keyframe_poses;
+  /// The message for SLAMD_KEYFRAMES.
+  KeyframeTrajectory trajectory;
+  bool relocalized = false;  ///< a lost tracking segment was put back into the map
+};
+
+struct BackendStageStats {
+  std::int64_t keyframes = 0;
+  std::int64_t loops = 0;
+  std::int64_t local_edges = 0;
+  std::int64_t relocalizations = 0;
+  std::int64_t optimizations = 0;
+  double last_optimization_ms = 0.0;
+  double max_optimization_ms = 0.0;
+};
+
+class BackendStage {
+ public:
+  BackendStage(const BackendConfig& config, std::shared_ptr<const Vocabulary> vocabulary);
+
+  /// Takes the next filtered frame (heartbeats and lost frames are ignored). Returns a correction
+  /// when this frame's keyframe made the back end re-optimise.
+  std::optional<BackendCorrection> process(const EstimatedPacket& packet);
+
+  /// Every tracked frame seen so far, at its keyframe's current (optimised) pose composed with
+  /// the frame's pose relative to that keyframe; T_world_camera in the corrected world.
+  Trajectory optimizedTrajectory() const;
+
+  /// Forgets everything (the RESET command).
+  void reset();
+
+  const BackendStageStats& stats() const { return stats_; }
+  const Backend& backend() const { return *backend_; }
+
+ private:
+  struct FrameAnchor {
+    double timestamp_s = 0.0;
+    std::int64_t keyframe_id = -1;
+    SE3 T_keyframe_camera = SE3::Identity();
+  };
+
+  BackendCorrection makeCorrection(const BackendUpdate& update, Utime utime);
+
+  BackendConfig config_;
+  std::shared_ptr<const Vocabulary> vocabulary_;
+  std::unique_ptr<Backend> backend_;
+  std::vector<FrameAnchor> anchors_;
+  std::vector<KeyframePoseEntry> keyframes_;  ///< id order; poses filled in on demand
+  std::int64_t latest_keyframe_id_ = -1;
+  SE3 T_world_latest_keyframe_ = SE3::Identity();  ///< uncorrected
+  std::int64_t sequence_ = 0;
+  BackendStageStats stats_;
+};
+
+}  // namespace slamd

@@ -1,0 +1,114 @@
+#include "slamd/app/backend_stage.hpp"
+
+#include <algorithm>
+
+#include "slamd/common/log.hpp"
+
+namespace slamd {
+
+namespace {
+constexpr const char* kLog = "backend";
+}  // namespace
+
+BackendStage::BackendStage(const BackendConfig& config,
+                           std::shared_ptr<const Vocabulary> vocabulary)
+    : config_(config),
+      vocabulary_(std::move(vocabulary)),
+      backend_(std::make_unique<Backend>(config_, vocabulary_)) {}
+
+void BackendStage::reset() {
+  backend_ = std::make_unique<Backend>(config_, vocabulary_);
+  anchors_.clear();
+  keyframes_.clear();
+  latest_keyframe_id_ = -1;
+  T_world_latest_keyframe_ = SE3::Identity();
+  stats_ = BackendStageStats();
+}
+
+std::optional<BackendCorrection> BackendStage::process(const EstimatedPacket& packet) {
+  if (!packet.frame || !packet.odometry) return std::nullopt;
+  const TrackingState state = packet.pose.tracking_state;
+  if (state == TrackingState::kLost || state == TrackingState::kNotInitialized) {
+    return std::nullopt;
+  }
+  const OdometryResult& odometry = *packet.odometry;
+  const SE3& T_world_camera = packet.pose.T_world_camera;  // uncorrected (filter) world
+  std::optional<BackendCorrection> correction;
+  if (odometry.is_keyframe && odometry.keyframe) {
+    // The graph takes the filter's pose: the published poses and the map are built from it.
+    auto keyframe = std::make_shared<Keyframe>(*odometry.keyframe);
+    keyframe->T_world_camera = T_world_camera;
+    // Measured straight against the previous keyframe: tracking's covariance of that step is the
+    // odometry edge's uncertainty.
+    const bool measured_from_previous_keyframe =
+        latest_keyframe_id_ >= 0 && odometry.reference_keyframe_id == latest_keyframe_id_;
+    const BackendUpdate update =
+        measured_from_previous_keyframe
+            ? backend_->addKeyframe(keyframe, odometry.covariance_ref_curr)
+            : backend_->addKeyframe(keyframe);
+    ++stats_.keyframes;
+    latest_keyframe_id_ = keyframe->id;
+    T_world_latest_keyframe_ = T_world_camera;
+    keyframes_.push_back(KeyframePoseEntry{keyframe->id, keyframe->utime, keyframe->segment,
+                                           T_world_camera});
+    if (update.optimized) correction = makeCorrection(update, keyframe->utime);
+  }
+  if (latest_keyframe_id_ >= 0) {
+    anchors_.push_back(FrameAnchor{utimeToSeconds(packet.pose.utime), latest_keyframe_id_,
+                                   T_world_latest_keyframe_.inverse() * T_world_camera});
+  }
+  return correction;
+}
+
+BackendCorrection BackendStage::makeCorrection(const BackendUpdate& update, Utime utime) {
+  ++stats_.optimizations;
+  stats_.loops = backend_->numLoops();
+  stats_.local_edges = backend_->numLocalEdges();
+  stats_.relocalizations = backend_->numRelocalizations();
+  stats_.last_optimization_ms = update.optimization.time_ms;
+  stats_.max_optimization_ms = std::max(stats_.max_optimization_ms, update.optimization.time_ms);
+
+  BackendCorrection correction;
+  correction.T_world_uncorrected = update.T_world_odometry;
+  correction.keyframe_poses = update.corrected_poses;
+  correction.relocalized = update.relocalized;
+  KeyframeTrajectory& trajectory = correction.trajectory;
+  trajectory.utime = utime;
+  trajectory.sequence = sequence_++;
+  trajectory.T_world_uncorrected = update.T_world_odometry;
+  trajectory.num_loops = backend_->numLoops();
+  trajectory.num_relocalizations = static_cast<int>(stats_.relocalizations);
+  trajectory.optimization_ms = update.optimization.time_ms;
+  trajectory.keyframes = keyframes_;
+  for (KeyframePoseEntry& entry : trajectory.keyframes) {
+    entry.T_world_camera = backend_->pose(entry.keyframe_id);
+  }
+  if (update.relocalized) {
+    SLAMD_LOG_INFO(kLog) << "keyframe " << update.keyframe_id
+                         << ": relocalised against keyframe " << update.relocalization.match_id
+                         << " after " << update.relocalization_attempts
+                         << " attempts: tracking resumes in the same map";
+  }
+  if (update.loop.status == LoopStatus::kLoopFound) {
+    SLAMD_LOG_INFO(kLog) << "keyframe " << update.keyframe_id << ": loop closed with keyframe "
+                         << update.loop.match_id << " (" << update.loop.num_inliers
+                         << " inliers)";
+  }
+  SLAMD_LOG_DEBUG(kLog) << "keyframe " << update.keyframe_id << ": " << update.num_local_edges
+                        << " local edges; graph of " << update.optimization.num_nodes
+                        << " keyframes, " << update.optimization.num_edges
+                        << " edges optimised in " << update.optimization.time_ms << " ms";
+  return correction;
+}
+
+Trajectory BackendStage::optimizedTrajectory() const {
+  Trajectory trajectory;
+  trajectory.reserve(anchors_.size());
+  for (const FrameAnchor& anchor : anchors_) {
+    trajectory.push_back(StampedPose{anchor.timestamp_s,
+                                     backend_->pose(anchor.keyframe_id) * anchor.T_keyframe_camera});
+  }
+  return trajectory;
+}
+
+}  // namespace slamd

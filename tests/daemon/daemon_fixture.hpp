@@ -1,0 +1,42 @@
+#pragma once
+// The in-process daemon fixture: a small (320x240) synthetic world, in-process LCM (memq://), a
+// temporary folder for outputs.
+
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <string>
+
+#include "slamd/app/slam_daemon.hpp"
+#include "slamd/common/config.hpp"
+#include "slamd/common/log.hpp"
+#include "test_data.hpp"
+
+namespace slamd {
+
+class DaemonInProcess : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    setLogLevel(LogLevel::kWarn);
+    dir_ = test::makeTempDir("daemon");
+  }
+  void TearDown() override {
+    setLogLevel(LogLevel::kInfo);
+    std::filesystem::remove_all(dir_);
+  }
+
+  Config smallSyntheticConfig(int frames) {
+    Config config = Config::fromFile(std::string(SLAMD_SOURCE_DIR) + "/config/synthetic.yaml");
+    for (const char* assignment :
+         {"camera.width=320", "camera.height=240", "camera.fx=262.5", "camera.fy=262.5",
+          "camera.cx=159.5", "camera.cy=119.5", "lcm.url=memq://"}) {
+      config.applyOverride(assignment);
+    }
+    config.set("synthetic.frames", std::to_string(frames));
+    return config;
+  }
+
+  std::filesystem::path dir_;
+};
+
+}  // namespace slamd
