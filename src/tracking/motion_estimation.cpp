@@ -266,6 +266,43 @@ int residualFromInverse(const Correspondence& c, const CameraIntrinsics& K,
   return 2;
 }
 
+double median(std::vector<double>& values) {
+  const auto mid = values.begin() + static_cast<std::ptrdiff_t>(values.size() / 2);
+  std::nth_element(values.begin(), mid, values.end());
+  return *mid;
+}
+
+/// Robust noise scales of the whitened reprojection and depth residuals at T_ref_curr: the
+/// median residual over its expected value for unit Gaussian noise (norm of 2D: 1.1774 sigma;
+/// absolute 1D: 0.6745 sigma). Clamped to [kMinNoiseScale, kMaxNoiseScale]; 1 with too few
+/// residuals to tell.
+void estimateNoiseScales(const std::vector<Correspondence>& matches,
+                         const std::vector<std::uint8_t>& use, const CameraIntrinsics& K,
+                         const SE3& T_ref_curr, double depth_sigma_coeff, double& scale_px,
+                         double& scale_depth) {
+  constexpr double kMinNoiseScale = 0.05;
+  constexpr double kMaxNoiseScale = 20.0;
+  constexpr std::size_t kMinResiduals = 12;
+  std::vector<double> px, depth;
+  Eigen::Vector3d r;
+  Eigen::Matrix<double, 3, 6> J;
+  const SE3 T_inv = T_ref_curr.inverse();
+  for (std::size_t i = 0; i < matches.size(); ++i) {
+    if (!use[i]) continue;
+    const int rows = residualFromInverse(matches[i], K, T_inv, depth_sigma_coeff, r, J);
+    if (rows >= 2) px.push_back(r.head<2>().norm());
+    if (rows == 3) depth.push_back(std::abs(r(2)));
+  }
+  scale_px = 1.0;
+  scale_depth = 1.0;
+  if (px.size() >= kMinResiduals) {
+    scale_px = std::clamp(median(px) / 1.1774, kMinNoiseScale, kMaxNoiseScale);
+  }
+  if (depth.size() >= kMinResiduals) {
+    scale_depth = std::clamp(median(depth) / 0.6745, kMinNoiseScale, kMaxNoiseScale);
+  }
+}
+
 }  // namespace
 
 int refinementResidual(const Correspondence& c, const CameraIntrinsics& K, const SE3& T_ref_curr,
@@ -280,6 +317,15 @@ RefinementResult refinePose(const std::vector<Correspondence>& matches,
   RefinementResult result;
   result.T_ref_curr = T_initial;
   const double k = options.huber_k;
+  // Noise scales (in units of the modelled sigmas) of the reprojection and depth residuals.
+  double scale_px = 1.0;
+  double scale_depth = 1.0;
+  if (options.estimate_noise_scale) {
+    estimateNoiseScales(matches, use, K, T_initial, options.depth_sigma_coeff, scale_px,
+                        scale_depth);
+  }
+  const double inv_scale_px = 1.0 / scale_px;
+  const double inv_scale_depth = 1.0 / scale_depth;
 
   struct Eval {
     double cost = 0.0;
@@ -303,8 +349,13 @@ RefinementResult refinePose(const std::vector<Correspondence>& matches,
         e.cost += 2.0 * k * 100.0;  // behind the camera: a large constant penalty
         continue;
       }
+      r.head<2>() *= inv_scale_px;
+      J.topRows<2>() *= inv_scale_px;
+      r(2) *= inv_scale_depth;
+      J.row(2) *= inv_scale_depth;
       ++e.used;
-      e.sum_sq_px += r.head<2>().squaredNorm() * c.pixel_sigma_px * c.pixel_sigma_px;
+      e.sum_sq_px +=
+          r.head<2>().squaredNorm() * c.pixel_sigma_px * c.pixel_sigma_px * scale_px * scale_px;
       const double s_reproj = r.head<2>().norm();
       const double w_reproj = huberWeight(s_reproj, k);
       e.cost += huberCost(s_reproj, k);

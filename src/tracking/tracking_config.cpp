@@ -39,6 +39,8 @@ TrackingConfig TrackingConfig::load(Config& config) {
       config.getInt("tracking.orb_fast_threshold", c.orb_fast_threshold, 1, 100);
   c.subpixel = config.getBool("tracking.subpixel", c.subpixel);
   c.patch_refinement = config.getBool("tracking.patch_refinement", c.patch_refinement);
+  c.align_blur_sigma_px =
+      config.getDouble("tracking.align_blur_sigma_px", c.align_blur_sigma_px, 0.0, 5.0);
   c.undistort = config.getBool("tracking.undistort", c.undistort);
   c.min_depth_m = config.getDouble("tracking.min_depth_m", c.min_depth_m, 0.05, 100.0);
   c.max_depth_m = config.getDouble("tracking.max_depth_m", c.max_depth_m, 0.05, 100.0);
@@ -65,7 +67,11 @@ TrackingConfig TrackingConfig::load(Config& config) {
   c.pixel_sigma_px = config.getDouble("tracking.pixel_sigma_px", c.pixel_sigma_px, 0.05, 20);
   c.depth_sigma_coeff =
       config.getDouble("tracking.depth_sigma_coeff", c.depth_sigma_coeff, 0.0, 1.0);
+  c.estimate_noise_scale = config.getBool("tracking.estimate_noise_scale", c.estimate_noise_scale);
   c.huber_k = config.getDouble("tracking.huber_k", c.huber_k, 0.1, 100);
+  c.joint_references = config.getInt("tracking.joint_references", c.joint_references, -1, 10);
+  c.joint_max_matches =
+      config.getInt("tracking.joint_max_matches", c.joint_max_matches, 10, 10000);
   c.fovis_levels = config.getInt("tracking.fovis_levels", c.fovis_levels, 1, 5);
   c.fovis_fast_threshold =
       config.getInt("tracking.fovis_fast_threshold", c.fovis_fast_threshold, 5, 100);

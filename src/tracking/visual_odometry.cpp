@@ -28,6 +28,30 @@ double bilinear(const cv::Mat& img, double u, double v) {
   return (1 - ay) * ((1 - ax) * a00 + ax * a01) + ay * ((1 - ax) * a10 + ax * a11);
 }
 
+RefinementOptions refinementOptions(const TrackingConfig& config) {
+  RefinementOptions options;
+  options.max_iterations = config.max_iterations;
+  options.huber_k = config.huber_k;
+  options.depth_sigma_coeff = config.depth_sigma_coeff;
+  options.estimate_noise_scale = config.estimate_noise_scale;
+  return options;
+}
+
+/// Marks the correspondences whose reprojection error under T_ref_curr is below threshold_px
+/// times their pixel sigma; returns how many are marked.
+int markInliers(const std::vector<Correspondence>& matches, const CameraIntrinsics& K,
+                const SE3& T_ref_curr, double threshold_px, std::vector<std::uint8_t>& inliers) {
+  inliers.assign(matches.size(), 0);
+  int count = 0;
+  for (std::size_t i = 0; i < matches.size(); ++i) {
+    if (reprojectionErrorPx(matches[i], K, T_ref_curr) < threshold_px * matches[i].pixel_sigma_px) {
+      inliers[i] = 1;
+      ++count;
+    }
+  }
+  return count;
+}
+
 }  // namespace
 
 const char* odometryStatusName(OdometryStatus status) {
@@ -77,6 +101,9 @@ struct VisualOdometry::TrackAttempt {
   bool guided = false;
   double time_matching_ms = 0.0;
   double time_motion_ms = 0.0;
+  /// The final correspondences (point_ref in the reference frame) and their inlier flags.
+  std::vector<Correspondence> matches;
+  std::vector<std::uint8_t> inliers;
 };
 
 VisualOdometry::VisualOdometry(const TrackingConfig& config)
@@ -271,7 +298,6 @@ VisualOdometry::TrackAttempt VisualOdometry::track(const FeatureSet& ref,
                                                    const CurrentFrame& curr) {
   TrackAttempt a;
   const CameraIntrinsics& K = curr.K;
-  const FeatureSet& cf = *curr.features;
   std::int64_t t0 = steadyNowNs();
   std::vector<Correspondence> matches;
   if (have_prior) {
@@ -327,18 +353,9 @@ VisualOdometry::TrackAttempt VisualOdometry::track(const FeatureSet& ref,
     num_inliers = ransac.num_inliers;
   }
 
-  RefinementOptions options;
-  options.max_iterations = config_.max_iterations;
-  options.huber_k = config_.huber_k;
-  options.depth_sigma_coeff = config_.depth_sigma_coeff;
+  const RefinementOptions options = refinementOptions(config_);
   auto recheck = [&](const SE3& T_est) {
-    num_inliers = 0;
-    for (std::size_t i = 0; i < matches.size(); ++i) {
-      const bool in = reprojectionErrorPx(matches[i], K, T_est) <
-                      config_.inlier_threshold_px * matches[i].pixel_sigma_px;
-      inliers[i] = in ? 1 : 0;
-      num_inliers += in ? 1 : 0;
-    }
+    num_inliers = markInliers(matches, K, T_est, config_.inlier_threshold_px, inliers);
   };
   RefinementResult refined = refinePose(matches, inliers, K, T, options);
   if (!refined.success) {
@@ -365,41 +382,7 @@ VisualOdometry::TrackAttempt VisualOdometry::track(const FeatureSet& ref,
     refined = refinePose(matches, inliers, K, refined.T_ref_curr, options);
   }
   if (refined.success && config_.patch_refinement) {
-    // Align each inlier's reference patch in the current image: the correspondences become
-    // sub-pixel consistent with the reference keypoints (not two independent detections).
-    std::vector<cv::Point2f> aligned;
-    std::vector<std::size_t> which;
-    const SE3 T_curr_ref = refined.T_ref_curr.inverse();
-    for (std::size_t i = 0; i < matches.size(); ++i) {
-      if (!inliers[i]) continue;
-      const Correspondence& c = matches[i];
-      // Local affine map between the views at this point (fronto-parallel patch at its depth):
-      // how a pixel step in the current image moves in the reference image.
-      const Eigen::Vector2d& ref_px = ref.pixels[static_cast<std::size_t>(c.ref_index)];
-      const double z = c.point_ref.z();
-      const Eigen::Vector2d p0 = K.project(T_curr_ref * c.point_ref);
-      const Eigen::Vector2d pu =
-          K.project(T_curr_ref * K.backProject(ref_px.x() + 1.0, ref_px.y(), z)) - p0;
-      const Eigen::Vector2d pv =
-          K.project(T_curr_ref * K.backProject(ref_px.x(), ref_px.y() + 1.0, z)) - p0;
-      Eigen::Matrix2d curr_from_ref;
-      curr_from_ref << pu, pv;
-      const Eigen::Matrix2d inv = curr_from_ref.inverse();
-      const cv::Matx22d ref_from_curr(inv(0, 0), inv(0, 1), inv(1, 0), inv(1, 1));
-      cv::Point2f out;
-      if (inv.allFinite() &&
-          alignPatch(ref.gray, ref.keypoints[static_cast<std::size_t>(c.ref_index)].pt, cf.gray,
-                     cf.keypoints[static_cast<std::size_t>(c.curr_index)].pt, 3.0, out,
-                     ref_from_curr)) {
-        aligned.push_back(out);
-        which.push_back(i);
-      }
-    }
-    const std::vector<Eigen::Vector2d> pixels = undistortPixels(aligned, K, config_);
-    for (std::size_t k = 0; k < which.size(); ++k) {
-      matches[which[k]].pixel_curr = pixels[k];
-      matches[which[k]].pixel_sigma_px = config_.pixel_sigma_px;
-    }
+    alignInlierPatches(ref, refined.T_ref_curr, curr, matches, inliers);
     recheck(refined.T_ref_curr);
     refined = refinePose(matches, inliers, K, refined.T_ref_curr, options);
   }
@@ -418,7 +401,107 @@ VisualOdometry::TrackAttempt VisualOdometry::track(const FeatureSet& ref,
   a.covariance = refined.covariance;
   a.num_inliers = num_inliers;
   a.rms_px = refined.rms_reprojection_px;
+  a.matches = std::move(matches);
+  a.inliers = std::move(inliers);
   return a;
+}
+
+void VisualOdometry::alignInlierPatches(const FeatureSet& ref, const SE3& T_ref_curr,
+                                       const CurrentFrame& curr,
+                                       std::vector<Correspondence>& matches,
+                                       const std::vector<std::uint8_t>& inliers) const {
+  // Align each inlier's reference patch in the current image: the correspondences become
+  // sub-pixel consistent with the reference keypoints (not two independent detections).
+  const CameraIntrinsics& K = curr.K;
+  const FeatureSet& cf = *curr.features;
+  std::vector<cv::Point2f> aligned;
+  std::vector<std::size_t> which;
+  const SE3 T_curr_ref = T_ref_curr.inverse();
+  for (std::size_t i = 0; i < matches.size(); ++i) {
+    if (!inliers[i]) continue;
+    const Correspondence& c = matches[i];
+    // Local affine map between the views at this point (fronto-parallel patch at its depth):
+    // how a pixel step in the current image moves in the reference image.
+    const Eigen::Vector2d& ref_px = ref.pixels[static_cast<std::size_t>(c.ref_index)];
+    const double z = c.point_ref.z();
+    const Eigen::Vector2d p0 = K.project(T_curr_ref * c.point_ref);
+    const Eigen::Vector2d pu =
+        K.project(T_curr_ref * K.backProject(ref_px.x() + 1.0, ref_px.y(), z)) - p0;
+    const Eigen::Vector2d pv =
+        K.project(T_curr_ref * K.backProject(ref_px.x(), ref_px.y() + 1.0, z)) - p0;
+    Eigen::Matrix2d curr_from_ref;
+    curr_from_ref << pu, pv;
+    const Eigen::Matrix2d inv = curr_from_ref.inverse();
+    const cv::Matx22d ref_from_curr(inv(0, 0), inv(0, 1), inv(1, 0), inv(1, 1));
+    cv::Point2f out;
+    if (inv.allFinite() &&
+        alignPatch(ref.align_gray, ref.keypoints[static_cast<std::size_t>(c.ref_index)].pt,
+                   cf.align_gray,
+                   cf.keypoints[static_cast<std::size_t>(c.curr_index)].pt, 3.0, out,
+                   ref_from_curr)) {
+      aligned.push_back(out);
+      which.push_back(i);
+    }
+  }
+  const std::vector<Eigen::Vector2d> pixels = undistortPixels(aligned, K, config_);
+  for (std::size_t k = 0; k < which.size(); ++k) {
+    matches[which[k]].pixel_curr = pixels[k];
+    matches[which[k]].pixel_sigma_px = config_.pixel_sigma_px;
+  }
+}
+
+void VisualOdometry::refineWithExtraReferences(const SE3& T_world_ref,
+                                               const std::vector<ExtraReference>& extras,
+                                               const CurrentFrame& curr, TrackAttempt& attempt) {
+  const CameraIntrinsics& K = curr.K;
+  std::vector<Correspondence> all = attempt.matches;
+  std::vector<std::uint8_t> use = attempt.inliers;
+  const std::size_t own = all.size();
+  std::int64_t t0 = steadyNowNs();
+  for (const ExtraReference& extra : extras) {
+    // Matches against the extra reference, guided tightly by the estimate; their points are then
+    // expressed in the main reference's frame through the (fixed) odometry poses.
+    const SE3 T_extra_ref = extra.T_world_extra.inverse() * T_world_ref;
+    const SE3 T_extra_curr = T_extra_ref * attempt.T_ref_curr;
+    std::vector<Correspondence> matches;
+    matchGuided(*extra.features, T_extra_curr, curr, config_.refine_search_radius_px, matches);
+    // A sample spread over the match list bounds the cost (patch alignment dominates it).
+    const std::size_t cap = static_cast<std::size_t>(config_.joint_max_matches);
+    if (matches.size() > cap) {
+      std::vector<Correspondence> kept;
+      kept.reserve(cap);
+      for (std::size_t i = 0; i < cap; ++i) kept.push_back(matches[i * matches.size() / cap]);
+      matches.swap(kept);
+    }
+    std::vector<std::uint8_t> inliers;
+    markInliers(matches, K, T_extra_curr, config_.inlier_threshold_px, inliers);
+    if (config_.patch_refinement) {
+      alignInlierPatches(*extra.features, T_extra_curr, curr, matches, inliers);
+      markInliers(matches, K, T_extra_curr, config_.inlier_threshold_px, inliers);
+    }
+    const SE3 T_ref_extra = T_extra_ref.inverse();
+    for (std::size_t i = 0; i < matches.size(); ++i) {
+      if (!inliers[i]) continue;
+      Correspondence c = matches[i];
+      c.point_ref = T_ref_extra * c.point_ref;
+      all.push_back(c);
+      use.push_back(1);
+    }
+  }
+  attempt.time_matching_ms += msSince(t0);
+  t0 = steadyNowNs();
+  if (all.size() > own) {
+    const RefinementOptions options = refinementOptions(config_);
+    RefinementResult refined = refinePose(all, use, K, attempt.T_ref_curr, options);
+    if (refined.success) {
+      markInliers(all, K, refined.T_ref_curr, config_.inlier_threshold_px, use);
+      refined = refinePose(all, use, K, refined.T_ref_curr, options);
+    }
+    // The covariance stays the main reference's own (the extra references' poses are uncertain
+    // too); only the estimate moves.
+    if (refined.success) attempt.T_ref_curr = refined.T_ref_curr;
+  }
+  attempt.time_motion_ms += msSince(t0);
 }
 
 SE3 VisualOdometry::alignRotation(const cv::Mat& small_curr, const CameraIntrinsics& K_full) const {
@@ -572,6 +655,13 @@ OdometryResult VisualOdometry::process(const RgbdFrame& frame, const RgbdFramePt
   // Keyframes keep the image for patch alignment; frames passed by reference may be reused by
   // the caller, so their image is copied.
   curr.features->gray = frame_ptr && gray.data == frame.gray.data ? gray : gray.clone();
+  if (config_.patch_refinement) {
+    if (config_.align_blur_sigma_px > 0.0) {
+      cv::GaussianBlur(gray, curr.features->align_gray, cv::Size(), config_.align_blur_sigma_px);
+    } else {
+      curr.features->align_gray = curr.features->gray;
+    }
+  }
   curr.buildGrid();
   cv::Mat small;
   if (config_.useRotationPrior()) {
@@ -723,6 +813,25 @@ OdometryResult VisualOdometry::process(const RgbdFrame& frame, const RgbdFramePt
         break;
       }
     }
+  }
+  if (!from_previous && config_.jointReferences() > 0) {
+    // Local window: the most recent other keyframes, held fixed. (The previous frame is no help:
+    // on fr1/xyz adding it made ATE and RPE worse, its pose being measured from the keyframe.)
+    std::vector<ExtraReference> extras;
+    for (auto it = recent_keyframes_.rbegin();
+         it != recent_keyframes_.rend() &&
+         static_cast<int>(extras.size()) < config_.jointReferences();
+         ++it) {
+      if (*it == keyframe_ || (*it)->utime == prev_utime_) continue;
+      extras.push_back({&(*it)->features, (*it)->T_world_camera});
+    }
+    const double matching_ms = attempt.time_matching_ms;
+    const double motion_ms = attempt.time_motion_ms;
+    refineWithExtraReferences(keyframe_->T_world_camera, extras, curr, attempt);
+    res.stats.time_matching_ms += attempt.time_matching_ms - matching_ms;
+    res.stats.time_motion_ms += attempt.time_motion_ms - motion_ms;
+    res.T_ref_curr = attempt.T_ref_curr;
+    T_world_curr = normalizedSE3(keyframe_->T_world_camera * attempt.T_ref_curr);
   }
   if (new_keyframe) {
     keyframe_ = makeKeyframe(curr, frame, frame_ptr, T_world_curr);

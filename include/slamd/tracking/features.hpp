@@ -27,6 +27,8 @@ struct FeatureSet {
   std::vector<Eigen::Vector3d> points;  ///< camera optical frame, metres; NaN without depth
   std::vector<float> scale;             ///< keypoint scale relative to level 0 (>= 1)
   cv::Mat gray;                         ///< the image the features come from (CV_8UC1, shared)
+  /// gray smoothed for patch alignment (tracking.align_blur_sigma_px; gray itself when 0)
+  cv::Mat align_gray;
   int num_with_depth = 0;
 
   std::size_t size() const { return keypoints.size(); }

@@ -135,6 +135,16 @@ class VisualOdometry {
                          std::vector<Correspondence>& matches) const;
   TrackAttempt track(const FeatureSet& ref, const SE3& T_ref_curr_prior, bool have_prior,
                      const CurrentFrame& curr);
+  /// Another reference measured jointly with the main one: its features and odometry pose.
+  struct ExtraReference {
+    const FeatureSet* features = nullptr;
+    SE3 T_world_extra = SE3::Identity();
+  };
+  void alignInlierPatches(const FeatureSet& ref, const SE3& T_ref_curr, const CurrentFrame& curr,
+                          std::vector<Correspondence>& matches,
+                          const std::vector<std::uint8_t>& inliers) const;
+  void refineWithExtraReferences(const SE3& T_world_ref, const std::vector<ExtraReference>& extras,
+                                 const CurrentFrame& curr, TrackAttempt& attempt);
   SE3 alignRotation(const cv::Mat& small_curr, const CameraIntrinsics& K) const;
   KeyframePtr makeKeyframe(const CurrentFrame& curr, const RgbdFrame& frame,
                            const RgbdFramePtr& frame_ptr, const SE3& T_world_camera);
