@@ -18,6 +18,10 @@ DaemonConfig DaemonConfig::load(Config& config) {
   c.publish_queue = config.getInt("daemon.publish_queue", c.publish_queue, 1, 1000);
   c.mapping_queue = config.getInt("daemon.mapping_queue", c.mapping_queue, 1, 1000);
   c.backend_queue = config.getInt("daemon.backend_queue", c.backend_queue, 1, 100000);
+  c.vanishing_point_thread = config.getBool("daemon.vanishing_point_thread",
+                                           c.vanishing_point_thread);
+  c.vanishing_point_wait_ms =
+      config.getDouble("daemon.vanishing_point_wait_ms", c.vanishing_point_wait_ms, 0.0, 1000.0);
   c.publish_frames = config.getBool("daemon.publish_frames", c.publish_frames);
   c.mapping_enabled = config.getBool("mapping.enabled", c.mapping_enabled);
   c.map_keyframes_only = config.getBool("mapping.keyframes_only", c.map_keyframes_only);

@@ -2,7 +2,8 @@
 
 namespace slamd {
 
-PoseEstimator::PoseEstimator(const FilterConfig& config) : config_(config) {}
+PoseEstimator::PoseEstimator(const FilterConfig& config, VanishingPointSource vanishing_points)
+    : config_(config), vanishing_point_source_(vanishing_points) {}
 
 void PoseEstimator::reset() {
   filter_.reset();
@@ -26,7 +27,11 @@ EstimatedPacket PoseEstimator::process(TrackedPacket packet) {
   input.T_prev_curr = last_utime_ > 0 ? odometry.T_prev_curr : SE3::Identity();
   input.covariance = last_utime_ > 0 ? odometry.covariance : Matrix6d::Identity() * 1e-12;
   input.dt_s = last_utime_ > 0 ? utimeToSeconds(odometry.utime - last_utime_) : 0.0;
-  input.gray = frame.gray;
+  if (vanishing_point_source_ == VanishingPointSource::kDetectHere) {
+    input.gray = frame.gray;
+  } else {
+    input.detection = std::move(packet.vanishing_point);
+  }
   const FilterOutput filtered = filter_->process(input);
   if (filtered.vanishing_point && filtered.update) {
     out.vanishing_point = VanishingPointReport{*filtered.vanishing_point, *filtered.update};

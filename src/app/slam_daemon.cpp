@@ -96,6 +96,12 @@ struct SlamDaemon::Impl {
   /// newest correction it finds.
   SpscQueue<PoseCorrection> publish_corrections{64};
   SpscQueue<BackendCorrection> mapping_corrections{64};
+  /// Vanishing-point thread (producer) -> filter thread (consumer), in frame order.
+  SpscQueue<VanishingPointPacket> vanishing_points{256};
+  WakeSignal vanishing_point_ready;
+  /// Detections the filter gave up waiting for, and ones that found the queue full.
+  std::atomic<std::uint64_t> vanishing_points_late{0};
+  std::atomic<std::uint64_t> vanishing_points_overflowed{0};
   std::atomic<std::int32_t> backend_keyframes{0};
   std::atomic<std::int32_t> backend_loops{0};
   std::atomic<std::int32_t> backend_relocalizations{0};
@@ -159,6 +165,8 @@ struct SlamDaemon::Impl {
   int writeOutputs();
   void runMappingStep(LcmBus& bus, const EstimatedPacket& packet, MappingThreadState& state);
   void applyMapCorrections(MappingThreadState& state);
+  std::optional<VanishingPoint> takeVanishingPoint(Utime utime, bool live,
+                                                  std::optional<VanishingPointPacket>& held);
   void runBackendStep(LcmBus& bus, const EstimatedPacket& packet, std::uint64_t& reset_seen);
   void finishBackend();
   void serveMapRequest(LcmBus& bus, const MapRequest& request);
@@ -230,6 +238,8 @@ void SlamDaemon::Impl::publishStatus(LcmBus& bus, StatusBuilder& builder, Pipeli
   extras.extra_errors["capture"] = source_stats.frames_skipped;
   extras.extra_drops["capture"] =
       source_stats.frames_dropped + frames_dropped_paused.load(std::memory_order_relaxed);
+  extras.extra_drops["vanishing"] = vanishing_points_late.load(std::memory_order_relaxed) +
+                                    vanishing_points_overflowed.load(std::memory_order_relaxed);
   extras.tracking_state = static_cast<TrackingState>(tracking_state.load(std::memory_order_relaxed));
   extras.map_occupied_voxels = map_occupied_voxels.load(std::memory_order_relaxed);
   extras.map_total_voxels = map_leaf_voxels.load(std::memory_order_relaxed);
@@ -353,7 +363,33 @@ int SlamDaemon::Impl::run(ShutdownSignals& signals) {
         return out;
       });
 
-  PoseEstimator estimator(filter_config);
+  // Vanishing points: detected on their own thread in parallel with tracking, joined to the
+  // tracked frame by the filter thread.
+  const bool vanishing_point_thread = daemon.vanishing_point_thread && filter_config.enabled &&
+                                      filter_config.vanishing_points;
+  std::optional<VanishingPointDetector> vanishing_point_detector;  // vanishing-point thread
+  if (vanishing_point_thread) {
+    pipeline.addSink<CapturePacket>(
+        "vanishing", captured,
+        {static_cast<std::size_t>(daemon.tracking_queue), capture_policy},
+        [&](CapturePacket packet) {
+          if (!packet.frame) return;
+          if (!vanishing_point_detector) {
+            vanishing_point_detector.emplace(filter_config, packet.frame->intrinsics);
+          }
+          VanishingPointPacket out{packet.frame->utime,
+                                   vanishing_point_detector->detect(packet.frame->gray)};
+          if (!vanishing_points.tryPush(std::move(out))) {
+            vanishing_points_overflowed.fetch_add(1, std::memory_order_relaxed);
+          }
+          vanishing_point_ready.notify();
+        });
+  }
+
+  PoseEstimator estimator(filter_config, vanishing_point_thread
+                                             ? VanishingPointSource::kPrecomputed
+                                             : VanishingPointSource::kDetectHere);
+  std::optional<VanishingPointPacket> held_vanishing_point;  // filter thread
   std::uint64_t filter_reset_seen = 0;
   auto estimated = pipeline.addStage<TrackedPacket, EstimatedPacket>(
       "filter", tracked, {static_cast<std::size_t>(daemon.filter_queue), EdgePolicy::kBackpressure},
@@ -362,6 +398,10 @@ int SlamDaemon::Impl::run(ShutdownSignals& signals) {
         if (generation != filter_reset_seen) {
           estimator.reset();
           filter_reset_seen = generation;
+        }
+        if (vanishing_point_thread && packet.frame) {
+          packet.vanishing_point =
+              takeVanishingPoint(packet.frame->utime, live, held_vanishing_point);
         }
         return estimator.process(std::move(packet));
       });
@@ -505,6 +545,11 @@ int SlamDaemon::Impl::run(ShutdownSignals& signals) {
                        << summary.duration_s << " s; capture-to-pose latency p50 "
                        << latency.p50_ms << " ms, p95 " << latency.p95_ms << " ms, p99 "
                        << latency.p99_ms << " ms";
+  if (vanishing_points_late.load() + vanishing_points_overflowed.load() > 0) {
+    SLAMD_LOG_INFO(kLog) << "vanishing points: " << vanishing_points_late.load()
+                         << " frames filtered without their detection (late or dropped), "
+                         << vanishing_points_overflowed.load() << " detections overflowed";
+  }
   if (!daemon.metrics_out.empty()) writeMetrics(stats, latency);
   if (backend) finishBackend();
   return writeOutputs();
@@ -633,6 +678,30 @@ void SlamDaemon::Impl::runMappingStep(LcmBus& bus, const EstimatedPacket& packet
                               std::memory_order_relaxed);
     state.next_occupancy_count_ns = steadyNowNs() + 1'000'000'000;
   }
+}
+
+std::optional<VanishingPoint> SlamDaemon::Impl::takeVanishingPoint(
+    Utime utime, bool live, std::optional<VanishingPointPacket>& held) {
+  // Datasets played as fast as possible wait for every detection (repeatable runs); the generous
+  // bound only guards against a detection that never comes (its frame failed on that thread).
+  const auto wait = live ? std::chrono::microseconds(
+                               static_cast<std::int64_t>(daemon.vanishing_point_wait_ms * 1000.0))
+                         : std::chrono::microseconds(2'000'000);
+  const auto deadline = std::chrono::steady_clock::now() + wait;
+  while (true) {
+    const auto seen = vanishing_point_ready.epoch();
+    if (!held) held = vanishing_points.tryPop();
+    while (held && held->utime < utime) held = vanishing_points.tryPop();  // frames tracking skipped
+    if (held && held->utime == utime) {
+      std::optional<VanishingPoint> detection = std::move(held->detection);
+      held.reset();
+      return detection;
+    }
+    if (held) break;  // the next detection is of a later frame: this frame's was dropped
+    if (!vanishing_point_ready.waitFor(seen, deadline)) break;
+  }
+  vanishing_points_late.fetch_add(1, std::memory_order_relaxed);
+  return std::nullopt;
 }
 
 void SlamDaemon::Impl::runBackendStep(LcmBus& bus, const EstimatedPacket& packet,

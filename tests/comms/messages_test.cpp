@@ -7,6 +7,7 @@
 #include "slamd/command_t.hpp"
 #include "slamd/comms/message_codec.hpp"
 #include "slamd/comms/pose_codec.hpp"
+#include "slamd/keyframe_trajectory_t.hpp"
 #include "slamd/odometry_t.hpp"
 #include "slamd/pose_t.hpp"
 #include "slamd/rgbd_frame_t.hpp"
@@ -137,8 +138,25 @@ slamd::status_t example() {
   m.tracking_state = slamd::pose_t::TRACKING_OK;
   m.map_occupied_voxels = 1000;
   m.map_total_voxels = 5000;
+  m.num_keyframes = 40; m.num_loops = 3; m.num_relocalizations = 1;
   m.message = "ok";
   return m;
+}
+
+template <>
+slamd::keyframe_trajectory_t example() {
+  KeyframeTrajectory trajectory;
+  trajectory.utime = 15;
+  trajectory.sequence = 2;
+  trajectory.T_world_uncorrected = makeSE3(Eigen::Vector3d(0.1, -0.2, 0.05),
+                                           Eigen::Quaterniond(Eigen::AngleAxisd(0.1, Eigen::Vector3d::UnitZ())));
+  trajectory.num_loops = 1;
+  trajectory.optimization_ms = 4.5;
+  for (std::int64_t id = 0; id < 3; ++id) {
+    trajectory.keyframes.push_back(KeyframePoseEntry{
+        id, 15 - 3 + id, 0, makeSE3(Eigen::Vector3d(0.3 * id, 0, 0), Eigen::Quaterniond::Identity())});
+  }
+  return toKeyframeTrajectoryMessage(trajectory);
 }
 
 template <>
@@ -183,7 +201,7 @@ class MessageRoundTrip : public ::testing::Test {};
 using AllMessages =
     ::testing::Types<slamd::rgbd_frame_t, slamd::pose_t, slamd::odometry_t, slamd::vanishing_point_t,
                      slamd::voxel_map_t, slamd::voxel_map_update_t, slamd::status_t,
-                     slamd::command_t, bot_core::pose_t, kinect::frame_msg_t>;
+                     slamd::keyframe_trajectory_t, slamd::command_t, bot_core::pose_t, kinect::frame_msg_t>;
 TYPED_TEST_SUITE(MessageRoundTrip, AllMessages);
 
 TYPED_TEST(MessageRoundTrip, EncodeDecodeReproducesTheMessage) {
@@ -247,6 +265,38 @@ TEST(PoseCodec, PoseEstimateRoundTripsThroughPoseT) {
   EXPECT_DOUBLE_EQ(bot.pos[2], pose.T_world_camera.translation().z());
   const Eigen::Quaterniond q(pose.T_world_camera.linear());
   EXPECT_NEAR(std::abs(bot.orientation[0]), std::abs(q.w()), 1e-12);
+}
+
+TEST(PoseCodec, KeyframeTrajectoryRoundTrips) {
+  const slamd::keyframe_trajectory_t message = example<slamd::keyframe_trajectory_t>();
+  EXPECT_EQ(message.num_keyframes, 3);
+  const KeyframeTrajectory back = fromKeyframeTrajectoryMessage(message);
+  ASSERT_EQ(back.keyframes.size(), 3u);
+  EXPECT_EQ(back.keyframes[2].keyframe_id, 2);
+  EXPECT_NEAR(back.keyframes[2].T_world_camera.translation().x(), 0.6, 1e-12);
+  EXPECT_NEAR(back.T_world_uncorrected.translation().y(), -0.2, 1e-12);
+  EXPECT_EQ(back.num_loops, 1);
+}
+
+TEST(PoseEstimateTransform, ACorrectionRotatesTranslationCovarianceAndVelocityOnly) {
+  PoseEstimate pose;
+  pose.T_world_camera = expSE3((Vector6d() << 1, 0, 0, 0, 0, 0.2).finished());
+  pose.covariance = Matrix6d::Zero();
+  pose.covariance(0, 0) = 4e-4;  // 2 cm along world x
+  pose.covariance(5, 5) = 1e-4;  // camera-frame rotation
+  pose.linear_velocity_world_mps = Eigen::Vector3d(1, 0, 0);
+  pose.angular_velocity_camera_radps = Eigen::Vector3d(0, 0, 0.5);
+  // A correction turning the world by 90 degrees about z: world x becomes world y.
+  const SE3 T_new_old = makeSE3(Eigen::Vector3d(0, 0, 1),
+                                Eigen::Quaterniond(Eigen::AngleAxisd(M_PI / 2, Eigen::Vector3d::UnitZ())));
+  const PoseEstimate moved = transformedPose(pose, T_new_old);
+  EXPECT_LT((moved.T_world_camera.matrix() - (T_new_old * pose.T_world_camera).matrix()).norm(),
+            1e-12);
+  EXPECT_NEAR(moved.covariance(0, 0), 0.0, 1e-15);
+  EXPECT_NEAR(moved.covariance(1, 1), 4e-4, 1e-15);
+  EXPECT_NEAR(moved.covariance(5, 5), 1e-4, 1e-15);
+  EXPECT_LT((moved.linear_velocity_world_mps - Eigen::Vector3d(0, 1, 0)).norm(), 1e-12);
+  EXPECT_EQ(moved.angular_velocity_camera_radps, pose.angular_velocity_camera_radps);
 }
 
 }  // namespace

@@ -46,6 +46,14 @@ struct DaemonConfig {
   /// end (never dropped: a lost keyframe would break the graph). The back end only does real work
   /// on keyframes, but a long optimisation must not hold up the filter: the queue absorbs it.
   int backend_queue = 600;
+  /// daemon.vanishing_point_thread (bool, default true): detect vanishing points on a thread of
+  /// their own, in parallel with tracking, instead of on the filter thread after it: takes the
+  /// detection (a few ms) off the capture-to-pose path. Only when the filter uses vanishing points.
+  bool vanishing_point_thread = true;
+  /// daemon.vanishing_point_wait_ms (double, default 5, 0..1000, ms): live and real-time sources
+  /// only: how long the filter waits for a frame's detection when it is not ready yet; a later
+  /// detection is skipped and counted. Datasets played as fast as possible always wait.
+  double vanishing_point_wait_ms = 5.0;
   /// daemon.publish_frames (bool, default false): republish every processed frame (channel and
   /// encodings: capture.publish.*), so lcm-logger captures the input and a log can be replayed
   /// into slamd.

@@ -23,6 +23,16 @@ struct CapturePacket {
 struct TrackedPacket {
   RgbdFramePtr frame;                     ///< null: heartbeat
   std::optional<OdometryResult> odometry;  ///< set for every frame
+  /// The frame's vanishing point, detected on the vanishing-point thread in parallel with
+  /// tracking; joined to the packet by the filter thread (empty when that thread is off or its
+  /// result was late).
+  std::optional<VanishingPoint> vanishing_point;
+};
+
+/// vanishing-point thread -> filter thread
+struct VanishingPointPacket {
+  Utime utime = 0;  ///< capture time of the frame it was detected in
+  VanishingPoint detection;
 };
 
 /// A vanishing point found in a frame and what the filter did with it.

@@ -17,9 +17,16 @@
 
 namespace slamd {
 
+/// Where the filter's vanishing points come from.
+enum class VanishingPointSource {
+  kDetectHere,      ///< process() runs the detector on the frame's grey image
+  kPrecomputed,     ///< only TrackedPacket::vanishing_point (the daemon's own thread) is used
+};
+
 class PoseEstimator {
  public:
-  explicit PoseEstimator(const FilterConfig& config);
+  explicit PoseEstimator(const FilterConfig& config,
+                         VanishingPointSource vanishing_points = VanishingPointSource::kDetectHere);
 
   EstimatedPacket process(TrackedPacket packet);
   /// Forgets the state (RESET command); the next frame starts again at the identity.
@@ -27,6 +34,7 @@ class PoseEstimator {
 
  private:
   FilterConfig config_;
+  VanishingPointSource vanishing_point_source_;
   std::optional<VanishingPointFilter> filter_;  ///< created at the first frame (intrinsics)
   PoseEstimate last_pose_;
   Utime last_utime_ = 0;

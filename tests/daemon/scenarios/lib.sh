@@ -6,7 +6,10 @@ set -euo pipefail
 private_network() {
   ip link set lo up
   ip route add 224.0.0.0/4 dev lo
-  export LCM_DEFAULT_URL="udpm://239.255.76.67:7667?ttl=0"
+  # A 4 MB socket receive buffer (capped by net.core.rmem_max): frame messages of ~100 kB come in
+  # bursts, and on a busy machine a subscriber descheduled for a few frames would otherwise
+  # overflow the ~200 kB default and lose one (seen once with lcm-logger while 2 builds ran).
+  export LCM_DEFAULT_URL="udpm://239.255.76.67:7667?ttl=0&recv_buf_size=4194304"
 }
 
 # A 320x240 camera for the synthetic worlds: 4x less rendering and ~100 kB frame messages, so the
