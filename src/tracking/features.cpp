@@ -420,42 +420,43 @@ void attachGeometry(const cv::Mat& depth_m, const CameraIntrinsics& K,
   for (std::size_t i = 0; i < n; ++i) {
     features.points[i] = Eigen::Vector3d(nan, nan, nan);
     if (!have_depth) continue;
-    const int u = static_cast<int>(std::lround(features.keypoints[i].pt.x));
-    const int v = static_cast<int>(std::lround(features.keypoints[i].pt.y));
-    if (u < 1 || v < 1 || u >= depth_m.cols - 1 || v >= depth_m.rows - 1) continue;
-    double z = depth_m.at<float>(v, u);
-    if (!(z >= config.min_depth_m && z <= config.max_depth_m)) continue;
-    // Reject corners on depth discontinuities: the 3x3 neighbourhood must agree with the centre.
-    const double tolerance = 0.03 * z + 0.01;
-    bool consistent = true;
-    for (int dy = -1; dy <= 1 && consistent; ++dy) {
-      const float* row = depth_m.ptr<float>(v + dy);
-      for (int dx = -1; dx <= 1; ++dx) {
-        const double zn = row[u + dx];
-        if (std::isfinite(zn) && std::abs(zn - z) > tolerance) {
-          consistent = false;
-          break;
-        }
-      }
-    }
-    if (!consistent) continue;
-    // Sub-pixel keypoint: interpolate the depth bilinearly when the four neighbours are valid
-    // (they agree with the centre, checked above), so slanted surfaces get the right depth.
-    const double x = static_cast<double>(features.keypoints[i].pt.x);
-    const double y = static_cast<double>(features.keypoints[i].pt.y);
-    const int x0 = static_cast<int>(std::floor(x));
-    const int y0 = static_cast<int>(std::floor(y));
-    if (x0 >= 0 && y0 >= 0 && x0 + 1 < depth_m.cols && y0 + 1 < depth_m.rows) {
-      const double z00 = depth_m.at<float>(y0, x0), z01 = depth_m.at<float>(y0, x0 + 1);
-      const double z10 = depth_m.at<float>(y0 + 1, x0), z11 = depth_m.at<float>(y0 + 1, x0 + 1);
-      if (std::isfinite(z00) && std::isfinite(z01) && std::isfinite(z10) && std::isfinite(z11)) {
-        const double ax = x - x0, ay = y - y0;
-        z = (1 - ay) * ((1 - ax) * z00 + ax * z01) + ay * ((1 - ax) * z10 + ax * z11);
-      }
-    }
+    const double z = depthAtPixel(depth_m, static_cast<double>(features.keypoints[i].pt.x),
+                                  static_cast<double>(features.keypoints[i].pt.y), config);
+    if (std::isnan(z)) continue;
     features.points[i] = K.backProject(features.pixels[i].x(), features.pixels[i].y(), z);
     ++features.num_with_depth;
   }
+}
+
+double depthAtPixel(const cv::Mat& depth_m, double x, double y, const TrackingConfig& config) {
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const int u = static_cast<int>(std::lround(x));
+  const int v = static_cast<int>(std::lround(y));
+  if (u < 1 || v < 1 || u >= depth_m.cols - 1 || v >= depth_m.rows - 1) return nan;
+  double z = depth_m.at<float>(v, u);
+  if (!(z >= config.min_depth_m && z <= config.max_depth_m)) return nan;
+  // Reject corners on depth discontinuities: the 3x3 neighbourhood must agree with the centre.
+  const double tolerance = 0.03 * z + 0.01;
+  for (int dy = -1; dy <= 1; ++dy) {
+    const float* row = depth_m.ptr<float>(v + dy);
+    for (int dx = -1; dx <= 1; ++dx) {
+      const double zn = row[u + dx];
+      if (std::isfinite(zn) && std::abs(zn - z) > tolerance) return nan;
+    }
+  }
+  // Sub-pixel position: interpolate the depth bilinearly when the four neighbours are valid
+  // (they agree with the centre, checked above), so slanted surfaces get the right depth.
+  const int x0 = static_cast<int>(std::floor(x));
+  const int y0 = static_cast<int>(std::floor(y));
+  if (x0 >= 0 && y0 >= 0 && x0 + 1 < depth_m.cols && y0 + 1 < depth_m.rows) {
+    const double z00 = depth_m.at<float>(y0, x0), z01 = depth_m.at<float>(y0, x0 + 1);
+    const double z10 = depth_m.at<float>(y0 + 1, x0), z11 = depth_m.at<float>(y0 + 1, x0 + 1);
+    if (std::isfinite(z00) && std::isfinite(z01) && std::isfinite(z10) && std::isfinite(z11)) {
+      const double ax = x - x0, ay = y - y0;
+      z = (1 - ay) * ((1 - ax) * z00 + ax * z01) + ay * ((1 - ax) * z10 + ax * z11);
+    }
+  }
+  return z;
 }
 
 int descriptorDistance(const cv::Mat& a, int i, const cv::Mat& b, int j, DescriptorNorm norm) {

@@ -74,6 +74,7 @@ const char* odometryStatusName(OdometryStatus status) {
 struct VisualOdometry::CurrentFrame {
   std::shared_ptr<FeatureSet> features;
   CameraIntrinsics K;
+  cv::Mat depth_m;  ///< the frame's depth (CV_32F metres, NaN = none)
   int grid_cols = 0;
   int grid_rows = 0;
   std::vector<std::vector<int>> grid;
@@ -445,8 +446,12 @@ void VisualOdometry::alignInlierPatches(const FeatureSet& ref, const SE3& T_ref_
   }
   const std::vector<Eigen::Vector2d> pixels = undistortPixels(aligned, K, config_);
   for (std::size_t k = 0; k < which.size(); ++k) {
-    matches[which[k]].pixel_curr = pixels[k];
-    matches[which[k]].pixel_sigma_px = config_.pixel_sigma_px;
+    Correspondence& c = matches[which[k]];
+    c.pixel_curr = pixels[k];
+    c.pixel_sigma_px = config_.pixel_sigma_px;
+    // The depth where the patch now lies, not where the keypoint was detected.
+    c.depth_curr_m = depthAtPixel(curr.depth_m, static_cast<double>(aligned[k].x),
+                                  static_cast<double>(aligned[k].y), config_);
   }
 }
 
@@ -645,6 +650,7 @@ OdometryResult VisualOdometry::process(const RgbdFrame& frame, const RgbdFramePt
   std::int64_t t0 = steadyNowNs();
   CurrentFrame curr;
   curr.K = K;
+  curr.depth_m = frame.depth_m;
   curr.features = std::make_shared<FeatureSet>();
   try {
     extractor_->extract(gray, *curr.features);

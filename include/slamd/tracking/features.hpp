@@ -55,6 +55,12 @@ std::unique_ptr<FeatureExtractor> makeFeatureExtractor(const TrackingConfig& con
 void attachGeometry(const cv::Mat& depth_m, const CameraIntrinsics& intrinsics,
                     const TrackingConfig& config, FeatureSet& features);
 
+/// Depth (metres) at raw pixel (x, y) of depth_m (CV_32F, NaN = none): NaN outside
+/// [min_depth_m, max_depth_m], near the border or on a depth discontinuity (the 3x3 neighbourhood
+/// of the nearest pixel disagrees with it); otherwise interpolated bilinearly (pixel centres at
+/// integer coordinates).
+double depthAtPixel(const cv::Mat& depth_m, double x, double y, const TrackingConfig& config);
+
 /// Undistorted (ideal pinhole) pixels of raw image pixels, when configured and the intrinsics
 /// carry plumb-bob coefficients; otherwise the raw pixels.
 std::vector<Eigen::Vector2d> undistortPixels(const std::vector<cv::Point2f>& raw,
