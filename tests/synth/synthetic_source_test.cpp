@@ -109,6 +109,20 @@ TEST(SyntheticSource, MotionBlurAndExposureChangeTheColourOnly) {
   EXPECT_GT(cv::norm(a->color_bgr, b->color_bgr, cv::NORM_L1) / a->color_bgr.total(), 1.0);
 }
 
+TEST(SyntheticSource, ABlackoutCoversExactlyTheFramesInItsInterval) {
+  // At 30 Hz, [1.0 s, 1.5 s) covers frames 30 to 44.
+  const auto source = test::makeSyntheticSource(
+      "room", {"synthetic.blackout_start_s=1.0", "synthetic.blackout_duration_s=0.5"});
+  for (const int index : {29, 30, 44, 45}) {
+    const RgbdFramePtr frame = source->renderFrame(index);
+    const bool covered = index >= 30 && index <= 44;
+    EXPECT_EQ(cv::countNonZero(frame->gray) == 0, covered) << "frame " << index;
+    EXPECT_EQ(cv::countNonZero(frame->depth_m == frame->depth_m) == 0, covered)  // NaN != NaN
+        << "frame " << index;
+  }
+  EXPECT_EQ(source->groundTruth()->size(), static_cast<std::size_t>(source->frameCount()));
+}
+
 TEST(SyntheticSource, AWrittenSequenceReadBackByTheTumSourceGivesIdenticalFramesAndPoses) {
   const auto dir = test::makeTempDir("synth-tum");
   auto source = test::makeSyntheticSource("corridor", {"synthetic.frames=5"});

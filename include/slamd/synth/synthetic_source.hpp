@@ -47,6 +47,12 @@ struct SyntheticConfig {
   int frames = 0;                   ///< 0 = natural length of the trajectory
   std::uint64_t seed = 42;
   double start_time_s = 1.6e9;
+  /// synthetic.blackout_start_s / synthetic.blackout_duration_s (seconds from the first frame,
+  /// default 0 / 0 = none): frames in [start, start + duration) come out covered, as if a hand
+  /// or a passer-by blocked the lens: black colour, no depth. Ground truth still lists them.
+  /// For testing tracking loss and relocalisation.
+  double blackout_start_s = 0.0;
+  double blackout_duration_s = 0.0;
   synth::SceneParams scene;
   synth::MotionParams motion;
   synth::SensorParams sensor;
