@@ -1,5 +1,7 @@
-// The first 150 frames of TUM fr1/xyz with each fast front end; thresholds fail if tracking
-// breaks (they sit about 2x above what the front ends achieve).
+// TUM fr1/xyz: the first 150 frames with each fast front end, and the whole sequence with orb
+// against issue 6's targets (ATE <= 0.025 m, RPE(1 s) <= 0.020 m). Measured (release build):
+// 150 frames ATE orb 0.012 m, fovis 0.014 m (before the joint refinement and noise scales:
+// 0.026 and 0.018); whole sequence orb ATE 0.014 m, RPE 0.016 m (before: 0.032 and 0.025).
 
 #include <gtest/gtest.h>
 #include <opencv2/core.hpp>
@@ -14,10 +16,12 @@ namespace {
 
 struct RunResult {
   double ate_rmse_m = 0.0;
+  double rpe_rmse_m = 0.0;  ///< translation, 1 s
   int frames = 0;
   int failures = 0;
 };
 
+/// Runs the front end over the first max_frames frames (0 = all).
 RunResult runFirstFrames(FrontEndType frontend, int max_frames) {
   const auto folder = test::findDataset("tum_fr1_xyz");
   Config config = Config::fromFile(std::string(SLAMD_SOURCE_DIR) + "/config/tum_fr1.yaml");
@@ -28,7 +32,7 @@ RunResult runFirstFrames(FrontEndType frontend, int max_frames) {
   VisualOdometry vo(tracking);
   Trajectory estimate;
   RunResult result;
-  while (result.frames < max_frames) {
+  while (max_frames <= 0 || result.frames < max_frames) {
     const FrameRead read = source.next(std::chrono::milliseconds(1000));
     if (read.status == FrameRead::Status::kEndOfStream) break;
     if (read.status != FrameRead::Status::kFrame) continue;
@@ -38,6 +42,7 @@ RunResult runFirstFrames(FrontEndType frontend, int max_frames) {
     estimate.push_back({utimeToSeconds(r.utime), r.T_world_camera});
   }
   result.ate_rmse_m = eval::computeAte(*source.groundTruth(), estimate).translation_m.rmse;
+  result.rpe_rmse_m = eval::computeRpe(*source.groundTruth(), estimate).translation_m.rmse;
   return result;
 }
 
@@ -46,7 +51,7 @@ TEST(TumFr1Xyz, OrbTracksTheFirst150Frames) {
   const RunResult r = runFirstFrames(FrontEndType::kOrb, 150);
   EXPECT_EQ(r.frames, 150);
   EXPECT_EQ(r.failures, 0);
-  EXPECT_LT(r.ate_rmse_m, 0.03);
+  EXPECT_LT(r.ate_rmse_m, 0.018);
   RecordProperty("ate_rmse_m", std::to_string(r.ate_rmse_m));
 }
 
@@ -55,8 +60,19 @@ TEST(TumFr1Xyz, FovisTracksTheFirst150Frames) {
   const RunResult r = runFirstFrames(FrontEndType::kFovis, 150);
   EXPECT_EQ(r.frames, 150);
   EXPECT_EQ(r.failures, 0);
-  EXPECT_LT(r.ate_rmse_m, 0.03);
+  EXPECT_LT(r.ate_rmse_m, 0.018);
   RecordProperty("ate_rmse_m", std::to_string(r.ate_rmse_m));
+}
+
+TEST(TumFr1Xyz, OrbMeetsTheAccuracyTargetsOnTheWholeSequence) {
+  if (!test::findDataset("tum_fr1_xyz")) GTEST_SKIP() << test::missingDataMessage("tum_fr1_xyz");
+  const RunResult r = runFirstFrames(FrontEndType::kOrb, 0);
+  EXPECT_GT(r.frames, 790);
+  EXPECT_EQ(r.failures, 0);
+  EXPECT_LT(r.ate_rmse_m, 0.02);
+  EXPECT_LT(r.rpe_rmse_m, 0.02);
+  RecordProperty("ate_rmse_m", std::to_string(r.ate_rmse_m));
+  RecordProperty("rpe_rmse_m", std::to_string(r.rpe_rmse_m));
 }
 
 }  // namespace
