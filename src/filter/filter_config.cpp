@@ -68,6 +68,14 @@ FilterConfig FilterConfig::load(Config& config) {
                                                c.landmark_init_angle_deg, 0.01, 45.0);
   c.landmark_min_separation_deg = config.getDouble("filter.landmark_min_separation_deg",
                                                    c.landmark_min_separation_deg, 0.0, 90.0);
+  c.landmark_probation =
+      config.getInt("filter.landmark_probation", c.landmark_probation, 0, 1000);
+  c.landmark_window = config.getInt("filter.landmark_window", c.landmark_window, 1, 1000);
+  c.landmark_consistency_chi2 = config.getDouble("filter.landmark_consistency_chi2",
+                                                 c.landmark_consistency_chi2, 0.1, 1000.0);
+  c.landmark_retry_calls =
+      config.getInt("filter.landmark_retry_calls", c.landmark_retry_calls, 0, 1000000);
+  c.min_update_lines = config.getInt("filter.min_update_lines", c.min_update_lines, 2, 1000);
   c.max_landmarks = config.getInt("filter.max_landmarks", c.max_landmarks, 0, 32);
   c.initial_translation_sigma_m = config.getDouble("filter.initial_translation_sigma_m",
                                                    c.initial_translation_sigma_m, 0.0, 100.0);

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include <Eigen/Dense>
 
@@ -55,6 +56,7 @@ const char* vpUpdateStatusName(VpUpdateStatus status) {
     case VpUpdateStatus::kBadMeasurement: return "BAD_MEASUREMENT";
     case VpUpdateStatus::kUnknownLandmark: return "UNKNOWN_LANDMARK";
     case VpUpdateStatus::kNotVisible: return "NOT_VISIBLE";
+    case VpUpdateStatus::kProbation: return "PROBATION";
   }
   return "UNKNOWN";
 }
@@ -73,6 +75,7 @@ void PoseEkf::reset(const SE3& T_world_camera, const Matrix6d& pose_covariance) 
   T_world_camera_ = normalizedSE3(T_world_camera);
   landmarks_.clear();
   candidates_.clear();
+  retired_.clear();
   P_ = pose_covariance;
   symmetrize(P_);
 }
@@ -323,9 +326,18 @@ VpUpdateResult PoseEkf::updateLandmark(int landmark_id, const Eigen::Vector2d& p
   if (result.nis > config_.gate_chi2) {
     ++counters_.updates_gated;
     result.status = VpUpdateStatus::kGated;
+    recordOutcome(index, result.nis);
     return result;
   }
+  if (!landmarks_[index].active) {
+    ++counters_.probation_tests;
+    result.status = VpUpdateStatus::kProbation;
+    recordOutcome(index, result.nis);
+    return result;
+  }
+  const double nis = result.nis;
   acceptUpdate(index, H, R_px, &result);
+  recordOutcome(index, nis);
   return result;
 }
 
@@ -358,25 +370,38 @@ VpUpdateResult PoseEkf::updateVanishingPoint(const Eigen::Vector2d& pixel,
       best_H = std::move(H);
     }
   }
+  const Eigen::Vector3d d_world =
+      directionFromPixel(intrinsics_, T_world_camera_.linear(), pixel, nullptr, nullptr);
+  const double separation_cos = std::cos(config_.landmark_min_separation_deg * kDegToRad);
   if (have_best) {
     result = best;
     if (best.nis <= config_.gate_chi2) {
-      acceptUpdate(best_index, best_H, R_px, &result);
+      if (landmarks_[best_index].active) {
+        acceptUpdate(best_index, best_H, R_px, &result);
+      } else {
+        ++counters_.probation_tests;
+        result.status = VpUpdateStatus::kProbation;
+      }
+      recordOutcome(best_index, best.nis);
       return result;
     }
     ++counters_.updates_gated;
     result.status = VpUpdateStatus::kGated;
+    // Only a detection of this landmark's direction tells about its consistency; one far from it
+    // is another direction.
+    if (std::abs(landmarks_[best_index].d_world.dot(d_world)) > separation_cos) {
+      recordOutcome(best_index, best.nis);
+    }
   }
 
   // Not explained by any landmark: a candidate for a new one, when it is far from every known
-  // axis (a gated detection of a known direction is a bad detection, not a new direction).
+  // axis (a gated detection of a known direction is a bad detection, not a new direction) and
+  // from every retired one.
   if (static_cast<int>(landmarks_.size()) >= config_.max_landmarks) return result;
-  const Eigen::Vector3d d_world =
-      directionFromPixel(intrinsics_, T_world_camera_.linear(), pixel, nullptr, nullptr);
-  const double separation_cos = std::cos(config_.landmark_min_separation_deg * kDegToRad);
   for (const auto& landmark : landmarks_) {
     if (std::abs(landmark.d_world.dot(d_world)) > separation_cos) return result;
   }
+  if (nearRetired(d_world)) return result;
   candidates_.erase(std::remove_if(candidates_.begin(), candidates_.end(),
                                    [&](const Candidate& c) { return c.last_call < vp_calls_ - 1; }),
                     candidates_.end());
@@ -398,7 +423,7 @@ VpUpdateResult PoseEkf::updateVanishingPoint(const Eigen::Vector2d& pixel,
   }
   if (match->count >= config_.landmark_init_frames) {
     candidates_.erase(candidates_.begin() + (match - candidates_.data()));
-    const int id = addLandmarkUnchecked(pixel, R_px);
+    const int id = addLandmarkUnchecked(pixel, R_px, config_.landmark_probation == 0);
     result.status = VpUpdateStatus::kNewLandmark;
     result.landmark_id = id;
   }
@@ -412,10 +437,11 @@ int PoseEkf::addLandmark(const Eigen::Vector2d& pixel, const Eigen::Matrix2d& pi
     return -1;
   }
   if (static_cast<int>(landmarks_.size()) >= config_.max_landmarks) return -1;
-  return addLandmarkUnchecked(pixel, R_px);
+  return addLandmarkUnchecked(pixel, R_px, true);
 }
 
-int PoseEkf::addLandmarkUnchecked(const Eigen::Vector2d& pixel, const Eigen::Matrix2d& R_px) {
+int PoseEkf::addLandmarkUnchecked(const Eigen::Vector2d& pixel, const Eigen::Matrix2d& R_px,
+                                  bool active) {
   Eigen::Matrix<double, 2, 3> J_rotation;
   Eigen::Matrix2d J_pixel;
   const Eigen::Vector3d d_world =
@@ -435,9 +461,71 @@ int PoseEkf::addLandmarkUnchecked(const Eigen::Vector2d& pixel, const Eigen::Mat
   DirectionLandmark landmark;
   landmark.id = next_landmark_id_++;
   landmark.d_world = d_world;
+  landmark.active = active;
   landmarks_.push_back(landmark);
   ++counters_.landmarks_created;
   return landmark.id;
+}
+
+bool PoseEkf::recordOutcome(std::size_t index, double nis) {
+  DirectionLandmark& landmark = landmarks_[index];
+  if (!std::isfinite(nis)) nis = std::numeric_limits<double>::max();
+  const auto median = [](std::vector<double> v) {
+    const auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
+    std::nth_element(v.begin(), mid, v.end());
+    return *mid;
+  };
+  if (!landmark.active) {
+    landmark.recent_nis.push_back(nis);
+    if (static_cast<int>(landmark.recent_nis.size()) < config_.landmark_probation) return true;
+    if (median(landmark.recent_nis) <= config_.landmark_consistency_chi2) {
+      landmark.active = true;
+      landmark.recent_nis.clear();
+      ++counters_.landmarks_activated;
+      return true;
+    }
+    retireLandmark(index);
+    return false;
+  }
+  const auto window = static_cast<std::size_t>(config_.landmark_window);
+  if (landmark.recent_nis.size() < window) {
+    landmark.recent_nis.push_back(nis);
+    landmark.recent_next = 0;
+  } else {
+    landmark.recent_nis[landmark.recent_next] = nis;
+    landmark.recent_next = (landmark.recent_next + 1) % window;
+  }
+  if (landmark.recent_nis.size() < window ||
+      median(landmark.recent_nis) <= config_.landmark_consistency_chi2) {
+    return true;
+  }
+  retireLandmark(index);
+  return false;
+}
+
+void PoseEkf::retireLandmark(std::size_t index) {
+  // Marginalising a Gaussian = dropping its rows and columns.
+  const Eigen::Index n = P_.rows();
+  const Eigen::Index k = 6 + 2 * static_cast<Eigen::Index>(index);
+  const Eigen::Index tail = n - k - 2;
+  Eigen::MatrixXd P_new(n - 2, n - 2);
+  P_new.topLeftCorner(k, k) = P_.topLeftCorner(k, k);
+  if (tail > 0) {
+    P_new.topRightCorner(k, tail) = P_.topRightCorner(k, tail);
+    P_new.bottomLeftCorner(tail, k) = P_.bottomLeftCorner(tail, k);
+    P_new.bottomRightCorner(tail, tail) = P_.bottomRightCorner(tail, tail);
+  }
+  P_ = std::move(P_new);
+  retired_.push_back({landmarks_[index].d_world, vp_calls_ + config_.landmark_retry_calls});
+  landmarks_.erase(landmarks_.begin() + static_cast<std::ptrdiff_t>(index));
+  ++counters_.landmarks_retired;
+}
+
+bool PoseEkf::nearRetired(const Eigen::Vector3d& d_world) const {
+  const double separation_cos = std::cos(config_.landmark_min_separation_deg * kDegToRad);
+  return std::any_of(retired_.begin(), retired_.end(), [&](const Retired& r) {
+    return r.until_call > vp_calls_ && std::abs(r.d_world.dot(d_world)) > separation_cos;
+  });
 }
 
 // --- corrections -------------------------------------------------------------------------------
@@ -465,6 +553,7 @@ void PoseEkf::applyCorrection(const SE3& T_corrected_world) {
     landmarks_[i].d_world = d_new;
   }
   for (auto& c : candidates_) c.d_world = R_c * c.d_world;
+  for (auto& r : retired_) r.d_world = R_c * r.d_world;
   P_ = G * P_ * G.transpose();
   symmetrize(P_);
   T_world_camera_ = normalizedSE3(T_corrected_world * T_world_camera_);

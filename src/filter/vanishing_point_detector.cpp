@@ -89,6 +89,25 @@ void refineOnEdges(const cv::Mat& edges, const Eigen::Vector2d& p1, const Eigen:
   *q2 = mean + axis * axis.dot(p2 - mean);
 }
 
+/// Ideal (pinhole) pixel of a distorted pixel under the plumb-bob model, by the usual fixed-point
+/// iteration on normalised coordinates (converges in a few steps for Kinect-class lenses).
+Eigen::Vector2d undistortPixel(const CameraIntrinsics& K, const Eigen::Vector2d& distorted) {
+  const double k1 = K.distortion[0], k2 = K.distortion[1], p1 = K.distortion[2],
+               p2 = K.distortion[3], k3 = K.distortion[4];
+  const double xd = (distorted.x() - K.cx) / K.fx, yd = (distorted.y() - K.cy) / K.fy;
+  double x = xd, y = yd;
+  for (int i = 0; i < 8; ++i) {
+    const double r2 = x * x + y * y;
+    const double radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3));
+    const double dx = 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x);
+    const double dy = p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y;
+    if (!(radial > 0.1)) break;  // far outside the model's valid range: keep the last estimate
+    x = (xd - dx) / radial;
+    y = (yd - dy) / radial;
+  }
+  return {K.fx * x + K.cx, K.fy * y + K.cy};
+}
+
 }  // namespace
 
 const char* vanishingPointStatusName(VanishingPointStatus status) {
@@ -129,8 +148,15 @@ void VanishingPointDetector::extractSegments(const cv::Mat& gray) {
   // Resized pixel centres back to full-resolution pixels (centre of pixel 0 at 0 in both).
   const double sx = static_cast<double>(gray.cols) / input->cols;
   const double sy = static_cast<double>(gray.rows) / input->rows;
+  // Lines are straight only in the ideal pinhole image: with a distorted camera (fr1: k1 = 0.26)
+  // each segment's end points are undistorted, which makes the chord of a curved image line a
+  // piece of the straight one.
+  const bool distorted = intrinsics_.distortion_model == DistortionModel::kPlumbBob &&
+                         std::any_of(intrinsics_.distortion.begin(), intrinsics_.distortion.end(),
+                                     [](double k) { return k != 0.0; });
   const auto to_full = [&](double u, double v) {
-    return Eigen::Vector2d((u + 0.5) * sx - 0.5, (v + 0.5) * sy - 0.5);
+    const Eigen::Vector2d p((u + 0.5) * sx - 0.5, (v + 0.5) * sy - 0.5);
+    return distorted ? undistortPixel(intrinsics_, p) : p;
   };
   std::vector<LineSegment> raw;
   if (lsd_) {

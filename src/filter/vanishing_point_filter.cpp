@@ -12,7 +12,8 @@ FilterOutput VanishingPointFilter::process(const FilterInput& input) {
   if (config_.enabled && config_.vanishing_points &&
       (input.detection || !input.gray.empty())) {
     out.vanishing_point = input.detection ? *input.detection : detector_.detect(input.gray);
-    if (out.vanishing_point->status == VanishingPointStatus::kOk) {
+    if (out.vanishing_point->status == VanishingPointStatus::kOk &&
+        out.vanishing_point->num_supporting_lines >= config_.min_update_lines) {
       out.update =
           ekf_.updateVanishingPoint(out.vanishing_point->pixel, out.vanishing_point->pixel_covariance);
     }

@@ -155,7 +155,7 @@ TEST(CorridorSimulation, FilterIsConsistentNeesAndNisWithinChiSquareBounds) {
   }
   const double n = static_cast<double>(count);
   const double mean_nis = sum_nis / n;
-  EXPECT_GT(count, static_cast<std::size_t>(kRuns * (params.steps - 10)));
+  EXPECT_GT(count, static_cast<std::size_t>(kRuns * (params.steps - 20)));  // minus probation
   EXPECT_GE(mean_nis, chiSquareQuantile(2.0 * n, -1.96) / n);
   EXPECT_LE(mean_nis, chiSquareQuantile(2.0 * n, 1.96) / n);
   RecordProperty("mean_nis", std::to_string(mean_nis));
@@ -259,8 +259,9 @@ TEST(CorridorSimulation, FilterStageOnRenderedCorridorImagesBeatsOdometry) {
               kSteps, odometry_error, ekf_error, max_ekf_error * kRadToDeg, accepted, kSteps);
   EXPECT_GT(accepted, kSteps * 8 / 10);
   // The absolute yaw/pitch error is bounded by the landmark's initial error (odometry drift over
-  // the frames that confirm it), here ~0.5 degrees; it must not grow.
-  EXPECT_LT(max_ekf_error * kRadToDeg, 1.5);
+  // the frames that confirm it) plus the drift during its 10-frame probation (no updates yet),
+  // here up to ~1.7 degrees; it must not grow after that.
+  EXPECT_LT(max_ekf_error * kRadToDeg, 2.0);
   EXPECT_LT(ekf_error * 3.0, odometry_error);
   EXPECT_EQ(filter.ekf().landmarks().size(), 1u);
 }
@@ -296,7 +297,7 @@ TEST(CorridorSimulation, PrecomputedDetectionGivesTheSameEstimateWithoutDetectin
   }
   EXPECT_EQ(precomputed.detector().counters().images, 0);
   EXPECT_EQ(inside.detector().counters().images, 30);
-  EXPECT_GT(precomputed.ekf().counters().updates_accepted, 20);
+  EXPECT_GT(precomputed.ekf().counters().updates_accepted, 10);  // 30 frames minus probation
 }
 
 TEST(CorridorSimulation, FilterStageCountsBadImagesAndKeepsPredicting) {

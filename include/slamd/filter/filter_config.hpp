@@ -105,6 +105,31 @@ struct FilterConfig {
   /// `landmark_min_separation_deg` (double, default 20, 0..90, degrees): a candidate closer than
   /// this to an existing landmark's axis is never created (a gated detection of a known direction).
   double landmark_min_separation_deg = 20.0;
+  /// `landmark_consistency_chi2` (double, default 13.82, 0.1..1000, dimensionless): a landmark is
+  /// consistent while the median NIS of the recent detections of its direction (within
+  /// landmark_min_separation_deg, gated or not) stays at or below this (13.82 = 99.9% of
+  /// chi-square with 2 DoF; the median of a consistent landmark's NIS is ~1.4). The median ignores
+  /// occasional wrong detections; it is looser than gate_chi2 because successive innovations are
+  /// correlated (the same odometry drift), so a consistent landmark can stay a little above the
+  /// gate for a few frames, while a wrong one lands far above most of the time.
+  double landmark_consistency_chi2 = 13.82;
+  /// `landmark_probation` (int, default 10, 0..1000, detections): a landmark created from
+  /// detections (not by addLandmark) first only tests this many detections of its direction
+  /// without updating anything; then it becomes active (updates the pose) if consistent, otherwise
+  /// it is retired. 0 = active at once.
+  int landmark_probation = 10;
+  /// `landmark_window` (int, default 60, 1..1000, detections): an active landmark is retired when
+  /// the last landmark_window detections of its direction are inconsistent (it is not a fixed
+  /// direction, or its detections are far worse than their covariance says).
+  int landmark_window = 60;
+  /// `landmark_retry_calls` (int, default 150, 0..1000000, vanishing points): after a landmark is
+  /// retired its direction cannot start a new landmark for this many vanishing points (5 s at
+  /// 30 Hz); a later one goes through probation again.
+  int landmark_retry_calls = 150;
+  /// `min_update_lines` (int, default 12, 2..1000): a vanishing point supported by fewer lines is
+  /// reported but not given to the EKF. Corridors give 15-40 supporting lines; the short, few
+  /// lines of cluttered scenes (a desk: 5-10) meet at points that scatter by degrees.
+  int min_update_lines = 12;
   /// `max_landmarks` (int, default 3, 0..32): vanishing-direction landmarks kept in the state.
   int max_landmarks = 3;
   /// `initial_translation_sigma_m` (double, default 1e-6, 0..100, m) and

@@ -23,6 +23,10 @@
 // covariance is sigma^2 (A^T A)^-1 with sigma^2 = sum r_i^2 / (n - 2) from the residuals, plus
 // min_pixel_sigma_px^2 on the diagonal.
 //
+// Distortion: when the intrinsics carry plumb-bob coefficients (the image is not undistorted, as
+// from the TUM and OpenNI2 sources), every segment's end points are undistorted, so segments,
+// the vanishing point and its covariance are in the ideal pinhole image of the same K.
+//
 // Frames and units: pixels with (0, 0) the centre of the top-left pixel; direction_camera is the
 // unit vector K^-1 [u v 1]^T / |.| in the camera optical frame (x right, y down, z forward), so it
 // always has z > 0 (a vanishing point fixes a direction only up to sign).

@@ -54,7 +54,8 @@ struct FilterOutput {
   /// Set when an image or a precomputed detection was given and vanishing points are enabled
   /// (status says if one was found): the detection the filter used.
   std::optional<VanishingPoint> vanishing_point;
-  /// Set when a vanishing point was found and handed to the EKF.
+  /// Set when a vanishing point was found and handed to the EKF (only those supported by at least
+  /// filter.min_update_lines lines are).
   std::optional<VpUpdateResult> update;
 };
 

@@ -1,0 +1,253 @@
+// slamd-filter-replay: the filter stage over a whole sequence, for tuning and diagnosis. Runs the
+// visual odometry once (or reads it back from --odometry-cache), then the filter as the daemon's
+// filter thread does (one FilterInput per frame), and reports, against the source's ground truth:
+// ATE of odometry alone and of the filter, the end rotation error about the world axes, the NIS
+// of every vanishing point compared with a landmark, and the filter's thread CPU time per frame.
+//
+//   slamd-filter-replay --source tum:../shared/data/tum_fr1_xyz --config config/tum_fr1.yaml
+//       --odometry-cache /tmp/fr1_orb.odo --vp-log /tmp/vp.txt
+//
+// Depth pre-processing of the daemon's capture stage is not applied, so the odometry can differ
+// slightly from a slamd run; the daemon's numbers are the reference, this is a quick loop.
+
+#include <cmath>
+#include <cstdio>
+#include <ctime>
+#include <fstream>
+#include <iostream>
+#include <memory>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "slamd/capture/tum_source.hpp"
+#include "slamd/common/log.hpp"
+#include "slamd/common/program_options.hpp"
+#include "slamd/common/time.hpp"
+#include "slamd/common/trajectory.hpp"
+#include "slamd/eval/trajectory_error.hpp"
+#include "slamd/filter/vanishing_point_filter.hpp"
+#include "slamd/synth/synthetic_source.hpp"
+#include "slamd/tracking/visual_odometry.hpp"
+
+using namespace slamd;
+
+namespace {
+
+double threadCpuMs() {
+  timespec ts{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return static_cast<double>(ts.tv_sec) * 1e3 + static_cast<double>(ts.tv_nsec) * 1e-6;
+}
+
+struct OdometryRecord {
+  Utime utime = 0;
+  SE3 T_prev_curr = SE3::Identity();
+  Matrix6d covariance = Matrix6d::Identity();
+};
+
+bool readCache(const std::string& path, std::vector<OdometryRecord>* records) {
+  std::ifstream in(path);
+  if (!in) return false;
+  std::string line;
+  while (std::getline(in, line)) {
+    std::istringstream f(line);
+    OdometryRecord r;
+    f >> r.utime;
+    Eigen::Matrix4d M = Eigen::Matrix4d::Identity();
+    for (int i = 0; i < 3; ++i) {
+      for (int j = 0; j < 4; ++j) f >> M(i, j);
+    }
+    for (int i = 0; i < 36; ++i) f >> r.covariance(i / 6, i % 6);
+    if (!f) return false;
+    r.T_prev_curr.matrix() = M;
+    records->push_back(r);
+  }
+  return !records->empty();
+}
+
+void writeCache(const std::string& path, const std::vector<OdometryRecord>& records) {
+  std::ofstream out(path);
+  out.precision(17);
+  for (const auto& r : records) {
+    out << r.utime;
+    for (int i = 0; i < 3; ++i) {
+      for (int j = 0; j < 4; ++j) out << ' ' << r.T_prev_curr.matrix()(i, j);
+    }
+    for (int i = 0; i < 36; ++i) out << ' ' << r.covariance(i / 6, i % 6);
+    out << '\n';
+  }
+}
+
+double percentile(std::vector<double> v, double p) {
+  if (v.empty()) return 0.0;
+  std::sort(v.begin(), v.end());
+  return v[static_cast<std::size_t>(std::min<double>(v.size() - 1, p / 100.0 * v.size()))];
+}
+
+/// Rotation error at the end (ground truth vs estimate, the estimate expressed in the ground
+/// truth's world through the first pose), about the world axes, degrees.
+Eigen::Vector3d endRotationErrorDeg(const Trajectory& gt, const Trajectory& est) {
+  const auto nearest = [&](double t) -> const StampedPose* {
+    const StampedPose* best = nullptr;
+    for (const auto& p : gt) {
+      if (!best || std::abs(p.timestamp_s - t) < std::abs(best->timestamp_s - t)) best = &p;
+    }
+    return best && std::abs(best->timestamp_s - t) < 0.02 ? best : nullptr;
+  };
+  const StampedPose* g0 = nearest(est.front().timestamp_s);
+  const StampedPose* g1 = nearest(est.back().timestamp_s);
+  if (!g0 || !g1) return Eigen::Vector3d::Constant(NAN);
+  const Eigen::Matrix3d R_est_world = g0->T_world_camera.linear() *
+                                      est.front().T_world_camera.linear().transpose() *
+                                      est.back().T_world_camera.linear();
+  return logSO3(g1->T_world_camera.linear() * R_est_world.transpose()) * 180.0 / M_PI;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  ProgramOptions options("slamd-filter-replay",
+                         "Runs odometry and the vanishing-point filter over a sequence.");
+  options.addOption("source", "SOURCE", "tum:DIR or synthetic:SCENE",
+                    "tum:" SLAMD_SOURCE_DIR "/../shared/data/tum_fr1_xyz");
+  options.addOption("odometry-cache", "FILE", "read odometry from FILE, or write it there");
+  options.addOption("trajectory", "FILE", "write the filtered trajectory (TUM format)");
+  options.addOption("odometry-trajectory", "FILE", "write the odometry-only trajectory");
+  options.addOption("vp-log", "FILE", "one line per frame: status, pixel, update, NIS");
+  if (!options.parse(argc, argv)) return options.exitCode();
+  cv::setNumThreads(1);
+
+  const std::string spec = options.value("source");
+  const bool synthetic = spec.rfind("synthetic:", 0) == 0;
+  Config config;
+  std::unique_ptr<FrameSource> source;
+  FilterConfig filter_config;
+  TrackingConfig tracking;
+  try {
+    config = options.loadConfig(synthetic ? SLAMD_SOURCE_DIR "/config/synthetic.yaml"
+                                          : SLAMD_SOURCE_DIR "/config/tum_fr1.yaml");
+    tracking = TrackingConfig::load(config);
+    filter_config = FilterConfig::load(config);
+    if (synthetic) {
+      source = createSyntheticSource(spec.substr(10), config);
+    } else {
+      source = std::make_unique<TumSource>(spec.rfind("tum:", 0) == 0 ? spec.substr(4) : spec,
+                                           TumSourceConfig::load(config));
+    }
+    source->open();
+  } catch (const std::exception& e) {
+    std::cerr << e.what() << "\n";
+    return 3;
+  }
+
+  std::vector<OdometryRecord> cached;
+  const bool have_cache =
+      options.has("odometry-cache") && readCache(options.value("odometry-cache"), &cached);
+  std::unique_ptr<VisualOdometry> vo;
+  if (!have_cache) vo = std::make_unique<VisualOdometry>(tracking);
+  std::vector<OdometryRecord> computed;
+
+  std::unique_ptr<VanishingPointFilter> filter;
+  std::FILE* vp_log = options.has("vp-log") ? std::fopen(options.value("vp-log").c_str(), "w")
+                                            : nullptr;
+  Trajectory filtered, odometry_only;
+  SE3 chained = SE3::Identity();
+  std::vector<double> cpu_ms, nis_compared, nis_accepted;
+  int frames = 0, detected = 0, accepted = 0, gated = 0;
+  Utime last_utime = 0;
+  while (true) {
+    FrameRead read = source->next(std::chrono::milliseconds(1000));
+    if (read.status == FrameRead::Status::kEndOfStream) break;
+    if (read.status != FrameRead::Status::kFrame) continue;
+    const RgbdFrame& frame = *read.frame;
+    OdometryRecord r;
+    if (have_cache) {
+      if (static_cast<std::size_t>(frames) >= cached.size()) break;
+      r = cached[static_cast<std::size_t>(frames)];
+    } else {
+      const OdometryResult o = vo->processFrame(read.frame);
+      r = {o.utime, o.T_prev_curr, o.covariance};
+      computed.push_back(r);
+    }
+    if (!filter) filter = std::make_unique<VanishingPointFilter>(filter_config, frame.intrinsics);
+    FilterInput in;
+    in.utime = r.utime;
+    in.T_prev_curr = last_utime > 0 ? r.T_prev_curr : SE3::Identity();
+    in.covariance = last_utime > 0 ? r.covariance : Matrix6d::Identity() * 1e-12;
+    in.dt_s = last_utime > 0 ? utimeToSeconds(r.utime - last_utime) : 0.0;
+    in.gray = frame.gray;
+    const double start = threadCpuMs();
+    const FilterOutput out = filter->process(in);
+    cpu_ms.push_back(threadCpuMs() - start);
+    chained = chained * in.T_prev_curr;
+    last_utime = r.utime;
+    filtered.push_back({utimeToSeconds(r.utime), out.pose.T_world_camera});
+    odometry_only.push_back({utimeToSeconds(r.utime), chained});
+    ++frames;
+    const bool ok = out.vanishing_point && out.vanishing_point->status == VanishingPointStatus::kOk;
+    detected += ok;
+    if (out.update) {
+      accepted += out.update->accepted;
+      gated += out.update->status == VpUpdateStatus::kGated;
+      if (out.update->accepted || out.update->status == VpUpdateStatus::kGated) {
+        nis_compared.push_back(out.update->nis);
+      }
+      if (out.update->accepted) nis_accepted.push_back(out.update->nis);
+    }
+    if (vp_log) {
+      std::fprintf(vp_log, "%d %.6f %s", frames, utimeToSeconds(r.utime),
+                   out.vanishing_point ? vanishingPointStatusName(out.vanishing_point->status)
+                                       : "NONE");
+      if (ok) {
+        const VanishingPoint& vp = *out.vanishing_point;
+        std::fprintf(vp_log, " px %.1f %.1f sd %.2f %.2f lines %d/%d rms %.2f", vp.pixel.x(),
+                     vp.pixel.y(), std::sqrt(vp.pixel_covariance(0, 0)),
+                     std::sqrt(vp.pixel_covariance(1, 1)), vp.num_supporting_lines,
+                     vp.num_segments, vp.rms_residual_px);
+      }
+      if (out.update) {
+        std::fprintf(vp_log, " %s lm %d pred %.1f %.1f nis %.2f", vpUpdateStatusName(out.update->status),
+                     out.update->landmark_id, out.update->predicted_px.x(),
+                     out.update->predicted_px.y(), out.update->nis);
+      }
+      std::fprintf(vp_log, "\n");
+    }
+  }
+  source->close();
+  if (vp_log) std::fclose(vp_log);
+  if (!have_cache && options.has("odometry-cache")) {
+    writeCache(options.value("odometry-cache"), computed);
+  }
+  if (options.has("trajectory")) writeTumTrajectory(options.value("trajectory"), filtered, "filter");
+  if (options.has("odometry-trajectory")) {
+    writeTumTrajectory(options.value("odometry-trajectory"), odometry_only, "odometry");
+  }
+
+  double nis_mean = 0.0;
+  for (double v : nis_compared) nis_mean += v;
+  if (!nis_compared.empty()) nis_mean /= static_cast<double>(nis_compared.size());
+  double nis_acc_mean = 0.0;
+  for (double v : nis_accepted) nis_acc_mean += v;
+  if (!nis_accepted.empty()) nis_acc_mean /= static_cast<double>(nis_accepted.size());
+  std::printf("%d frames: %d vanishing points, %d accepted, %d gated, %zu landmarks; mean NIS %.2f "
+              "over %zu compared (accepted only %.2f); filter CPU median %.2f ms p95 %.2f ms\n",
+              frames, detected, accepted, gated, filter ? filter->ekf().landmarks().size() : 0u,
+              nis_mean, nis_compared.size(), nis_acc_mean, percentile(cpu_ms, 50),
+              percentile(cpu_ms, 95));
+  if (const auto gt = source->groundTruth(); gt && !gt->empty() && frames > 2) {
+    const double ate_odo = eval::computeAte(*gt, odometry_only).translation_m.rmse;
+    const double ate_filter = eval::computeAte(*gt, filtered).translation_m.rmse;
+    const Eigen::Vector3d rot_odo = endRotationErrorDeg(*gt, odometry_only);
+    const Eigen::Vector3d rot_filter = endRotationErrorDeg(*gt, filtered);
+    std::printf("ATE odometry %.4f m, filter %.4f m (%.3fx)\n", ate_odo, ate_filter,
+                ate_filter / ate_odo);
+    std::printf("end rotation error about world x y z (deg): odometry %.3f %.3f %.3f, filter "
+                "%.3f %.3f %.3f\n",
+                rot_odo.x(), rot_odo.y(), rot_odo.z(), rot_filter.x(), rot_filter.y(),
+                rot_filter.z());
+  }
+  return 0;
+}
