@@ -59,6 +59,9 @@ TEST(TumFr1Xyz, VanishingPointsDoNotHurtWithoutACorridor) {
   K.fy = 516.5;
   K.cx = 318.6;
   K.cy = 255.3;
+  // The images are not undistorted (as in the daemon): the detector undistorts segment end points.
+  K.distortion_model = DistortionModel::kPlumbBob;
+  K.distortion = {0.2624, -0.9531, -0.0054, 0.0026, 1.1633};
   VanishingPointFilter filter(FilterConfig{}, K);
   filter_test::NoisyOdometry odometry_model(0.003, 0.003, 42);
 
