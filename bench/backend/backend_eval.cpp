@@ -6,6 +6,7 @@
 //   slamd-backend-eval --source tum:../shared/data/tum_fr1_xyz --config config/tum_fr1.yaml
 //       --trajectory slam.txt --odometry-trajectory vo.txt
 //   slamd-backend-eval ... --blackout 300:40     # frames 300..339 blank: LOST, relocalisation
+//                                                # (blank frames are left out of the ATE)
 //
 // Trajectories (TUM format, every frame): odometry as tracking made it; "slam": each frame is the
 // final corrected pose of its reference keyframe composed with the frame's odometry pose relative
@@ -16,8 +17,10 @@
 // last line of stdout, one JSON metrics report (schema slamd.metrics/1).
 
 #include <algorithm>
+#include <cmath>
 #include <chrono>
 #include <cstdio>
+#include <ctime>
 #include <iostream>
 #include <limits>
 #include <memory>
@@ -28,6 +31,7 @@
 #include <opencv2/core.hpp>
 
 #include "slamd/backend/backend.hpp"
+#include "slamd/backend/keyframe_trajectory.hpp"
 #include "slamd/common/program_options.hpp"
 #include "slamd/common/time.hpp"
 #include "slamd/common/trajectory.hpp"
@@ -63,10 +67,57 @@ double percentileOf(std::vector<double> samples, double p) {
   return samples[std::min(index, samples.size() - 1)];
 }
 
+// Thread CPU time: what the work costs on one core, unaffected by other processes competing for
+// the CPU (the wall-clock times the back end reports include waiting for a core).
+double threadCpuMs() {
+  timespec ts{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return static_cast<double>(ts.tv_sec) * 1e3 + static_cast<double>(ts.tv_nsec) * 1e-6;
+}
+
 double mean(const std::vector<double>& samples) {
   double sum = 0.0;
   for (double v : samples) sum += v;
   return samples.empty() ? 0.0 : sum / static_cast<double>(samples.size());
+}
+
+// Each edge's measurement against the ground-truth relative pose of its keyframes (closest
+// ground-truth stamps), summarised per edge kind, with the worst edges.
+void reportEdges(const Trajectory& truth, const std::vector<KeyframePtr>& keyframes,
+                 const Backend& backend) {
+  std::vector<double> stamps;
+  for (const StampedPose& p : truth) stamps.push_back(p.timestamp_s);
+  std::unordered_map<std::int64_t, SE3> T_world_true;
+  for (const KeyframePtr& kf : keyframes) {
+    T_world_true[kf->id] =
+        truth[eval::findClosestIndex(stamps, utimeToSeconds(kf->utime))].T_world_camera;
+  }
+  const char* names[] = {"odometry", "loop", "local", "relocalization"};
+  std::vector<double> errors[4];
+  std::vector<std::pair<double, std::size_t>> worst;
+  const auto& edges = backend.graph().edges();
+  for (std::size_t e = 0; e < edges.size(); ++e) {
+    const PoseGraphEdge& edge = edges[e];
+    if (edge.information(0, 0) < 1e-3) continue;  // segment ties
+    const SE3 T_true = T_world_true.at(edge.from_id).inverse() * T_world_true.at(edge.to_id);
+    const double error_m = (T_true.inverse() * edge.T_from_to).translation().norm();
+    errors[static_cast<int>(edge.kind)].push_back(error_m);
+    worst.emplace_back(error_m, e);
+  }
+  for (int k = 0; k < 4; ++k) {
+    if (errors[k].empty()) continue;
+    std::printf("  %s edges: %zu, error vs truth median %.4f m, p95 %.4f m, max %.4f m\n",
+                names[k], errors[k].size(), percentileOf(errors[k], 50),
+                percentileOf(errors[k], 95), percentileOf(errors[k], 100));
+  }
+  std::sort(worst.rbegin(), worst.rend());
+  for (std::size_t w = 0; w < std::min<std::size_t>(5, worst.size()); ++w) {
+    const PoseGraphEdge& edge = edges[worst[w].second];
+    std::printf("  worst: %s %ld -> %ld, %.4f m, sigma_x %.4f m\n",
+                names[static_cast<int>(edge.kind)], static_cast<long>(edge.from_id),
+                static_cast<long>(edge.to_id), worst[w].first,
+                1.0 / std::sqrt(edge.information(0, 0)));
+  }
 }
 
 // A frame with no depth and a black image: tracking fails on it (for --blackout).
@@ -98,6 +149,8 @@ int main(int argc, char** argv) {
   options.addOption("online-trajectory", "FILE", "write the live-corrected trajectory (TUM)");
   options.addOption("blackout", "START:COUNT", "replace COUNT frames from START by blank ones");
   options.addOption("max-frames", "N", "stop after N frames (0 = all)", "0");
+  options.addFlag("edge-report",
+                  "per edge kind: measurement error against the ground truth (diagnostics)");
   options.addFlag("tracking-covariance",
                   "odometry edges weighted by tracking's covariance instead of the fixed ratio");
   if (!options.parse(argc, argv)) return options.exitCode();
@@ -159,11 +212,10 @@ int main(int argc, char** argv) {
   VisualOdometry vo(tracking);
   Backend backend(backend_config, vocabulary);
   std::vector<KeyframePtr> keyframes;
-  std::unordered_map<std::int64_t, std::size_t> keyframe_index;
-  Trajectory frames_odometry, frames_online;
-  std::vector<std::size_t> frame_keyframe;
-  std::vector<double> loop_ms, optimisation_ms, local_ms, iterations;
-  int optimisations = 0, lost_frames = 0, relocalization_attempts = 0;
+  KeyframeAnchoredTrajectory trajectory;
+  Trajectory frames_online;
+  std::vector<double> loop_ms, optimisation_ms, local_ms, iterations, backend_cpu_ms;
+  int optimisations = 0, full_optimisations = 0, lost_frames = 0, relocalization_attempts = 0;
   SE3 T_world_odometry = SE3::Identity();
   long index = 0;
   while (max_frames <= 0 || index < max_frames) {
@@ -175,23 +227,26 @@ int main(int argc, char** argv) {
     ++index;
     if (r.tracking_state == TrackingState::kLost) ++lost_frames;
     if (r.keyframe) {
-      keyframe_index[r.keyframe->id] = keyframes.size();
+      trajectory.addKeyframe(r.keyframe);
       const bool same_segment =
           !keyframes.empty() && keyframes.back()->segment == r.keyframe->segment;
       const bool measured_from_previous =
           same_segment && r.reference_keyframe_id == keyframes.back()->id;
       keyframes.push_back(r.keyframe);
       const auto start = std::chrono::steady_clock::now();
+      const double cpu_start_ms = threadCpuMs();
       const BackendUpdate u = tracking_covariance && measured_from_previous
                                   ? backend.addKeyframe(r.keyframe, r.covariance_ref_curr)
                                   : backend.addKeyframe(r.keyframe);
       const double total_ms =
           std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
               .count();
+      backend_cpu_ms.push_back(threadCpuMs() - cpu_start_ms);
       T_world_odometry = u.T_world_odometry;
       loop_ms.push_back(u.loop.time_ms);
       if (u.optimized) {
         ++optimisations;
+        if (u.full_optimization) ++full_optimisations;
         optimisation_ms.push_back(u.optimization.time_ms);
         iterations.push_back(u.optimization.iterations);
       }
@@ -213,28 +268,18 @@ int main(int argc, char** argv) {
                                   : "");
       }
     }
-    if (!keyframes.empty()) {
-      std::size_t reference = keyframes.size() - 1;
-      if (const auto it = keyframe_index.find(r.reference_keyframe_id);
-          it != keyframe_index.end() && keyframes[it->second]->segment == r.segment) {
-        reference = it->second;
-      }
-      const double t_s = utimeToSeconds(r.utime);
-      frames_odometry.push_back({t_s, r.T_world_camera});
-      frames_online.push_back({t_s, T_world_odometry * r.T_world_camera});
-      frame_keyframe.push_back(reference);
+    // Blank frames carry no information; they are left out of the trajectories.
+    if (!blank) {
+      if (keyframes.empty()) continue;
+      trajectory.addFrame(r);
+      frames_online.push_back({utimeToSeconds(r.utime), T_world_odometry * r.T_world_camera});
     }
   }
   source->close();
 
   // Full SLAM: each frame moves with its reference keyframe's final correction.
-  Trajectory frames_slam;
-  for (std::size_t f = 0; f < frames_odometry.size(); ++f) {
-    const KeyframePtr& kf = keyframes[frame_keyframe[f]];
-    frames_slam.push_back({frames_odometry[f].timestamp_s,
-                           backend.pose(kf->id) * kf->T_world_camera.inverse() *
-                               frames_odometry[f].T_world_camera});
-  }
+  const Trajectory frames_odometry = trajectory.odometry();
+  const Trajectory frames_slam = trajectory.corrected(backend);
   Trajectory kf_odometry, kf_corrected;
   for (const KeyframePtr& kf : keyframes) {
     const double t_s = utimeToSeconds(kf->utime);
@@ -270,9 +315,15 @@ int main(int argc, char** argv) {
               relocalization_attempts, backend.numLoops(), backend.numLocalEdges(),
               backend.graph().numNodes(), backend.graph().numEdges());
   report.set("optimization_iterations_mean", mean(iterations));
-  std::printf("per keyframe: %d optimisations (%.1f iterations mean), %.2f ms mean, %.2f ms p95, "
-              "%.2f ms max; loop detection %.2f ms mean; local matching %.2f ms mean\n",
-              optimisations, mean(iterations), mean(optimisation_ms),
+  report.setLatencySamples("backend_cpu", backend_cpu_ms);
+  std::printf("back end per keyframe (thread CPU): %.1f ms mean, %.1f ms p95, %.1f ms max\n",
+              mean(backend_cpu_ms), percentileOf(backend_cpu_ms, 95),
+              percentileOf(backend_cpu_ms, 100));
+  report.set("full_optimizations_count", full_optimisations);
+  std::printf("per keyframe: %d optimisations (%d of the whole graph; %.1f iterations mean), "
+              "%.2f ms mean, %.2f ms p95, %.2f ms max; loop detection %.2f ms mean; local "
+              "matching %.2f ms mean\n",
+              optimisations, full_optimisations, mean(iterations), mean(optimisation_ms),
               percentileOf(optimisation_ms, 95),
               percentileOf(optimisation_ms, 100), mean(loop_ms), mean(local_ms));
   if (const auto gt = source->groundTruth(); gt && !gt->empty()) {
@@ -294,6 +345,7 @@ int main(int argc, char** argv) {
                   online.ate_m);
       std::printf("frame RPE(1 s) RMSE: odometry %.4f m / %.3f deg, full SLAM %.4f m / %.3f deg\n",
                   odometry.rpe_m, odometry.rpe_deg, slam.rpe_m, slam.rpe_deg);
+      if (options.has("edge-report")) reportEdges(*gt, keyframes, backend);
       std::printf("keyframe ATE RMSE: odometry %.4f m, after the back end %.4f m (%.1fx)\n",
                   kf_before.ate_m, kf_after.ate_m, kf_before.ate_m / std::max(kf_after.ate_m, 1e-12));
     } catch (const std::exception& e) {

@@ -51,8 +51,43 @@ BackendUpdate Backend::addKeyframe(const KeyframePtr& keyframe,
   return add(keyframe, &covariance_prev_curr);
 }
 
-void Backend::addLocalEdges(const Keyframe& keyframe, BackendUpdate& update) {
-  if (config_.local_edges <= 0) return;
+bool Backend::addEdge(const PoseGraphEdge& edge) {
+  if (!graph_.addEdge(edge)) return false;
+  neighbours_[edge.from_id].push_back(edge.to_id);
+  neighbours_[edge.to_id].push_back(edge.from_id);
+  return true;
+}
+
+double Backend::edgeChi2(const PoseGraphEdge& edge) const {
+  const Vector6d e =
+      poseGraphEdgeError(edge.T_from_to, graph_.pose(edge.from_id), graph_.pose(edge.to_id));
+  return e.dot(edge.information * e);
+}
+
+std::vector<std::int64_t> Backend::localWindow(std::int64_t keyframe_id) const {
+  // Breadth first from the new keyframe: nearest keyframes (in edges) first.
+  std::vector<std::int64_t> window{keyframe_id};
+  std::unordered_map<std::int64_t, int> hops{{keyframe_id, 0}};
+  for (std::size_t head = 0; head < window.size(); ++head) {
+    const std::int64_t id = window[head];
+    const int h = hops.at(id);
+    if (h >= config_.local_window_hops) continue;
+    const auto it = neighbours_.find(id);
+    if (it == neighbours_.end()) continue;
+    for (std::int64_t next : it->second) {
+      if (hops.count(next) != 0) continue;
+      if (static_cast<int>(window.size()) >= config_.local_window_size) return window;
+      hops[next] = h + 1;
+      window.push_back(next);
+    }
+  }
+  return window;
+}
+
+std::vector<LoopDetection> Backend::addLocalEdges(const Keyframe& keyframe,
+                                                  BackendUpdate& update) {
+  std::vector<LoopDetection> added;
+  if (config_.local_edges <= 0) return added;
   const std::int64_t root = segmentRoot(keyframe.segment);
   const std::int64_t previous_id = previous_ != nullptr ? previous_->id : -1;
   // The previous keyframe is already linked by odometry from the same images; keyframes of
@@ -60,9 +95,14 @@ void Backend::addLocalEdges(const Keyframe& keyframe, BackendUpdate& update) {
   const LoopDetector::KeyframeFilter allowed = [&](std::int64_t id, std::int64_t segment) {
     return id != previous_id && graph_.hasNode(id) && segmentRoot(segment) == root;
   };
-  const std::vector<LoopDetection> matches = detector_.matchLocal(keyframe, allowed);
+  const SE3 T_world_query = graph_.pose(keyframe.id);
+  const LoopDetector::PosePrior prior = [&](std::int64_t id, SE3& T_match_query) {
+    if (!graph_.hasNode(id)) return false;
+    T_match_query = graph_.pose(id).inverse() * T_world_query;
+    return true;
+  };
+  const std::vector<LoopDetection> matches = detector_.matchLocal(keyframe, allowed, prior);
   const KeyframeInfo& query = keyframes_.at(keyframe.id);
-  const SE3& T_world_query = graph_.pose(keyframe.id);
   for (const LoopDetection& match : matches) {
     if (update.num_local_edges >= config_.local_edges) break;
     // False-match protection: the measured relative pose must agree with the current estimate
@@ -80,12 +120,18 @@ void Backend::addLocalEdges(const Keyframe& keyframe, BackendUpdate& update) {
       ++update.num_local_rejected;
       continue;
     }
-    if (graph_.addEdge({match.match_id, keyframe.id, match.T_match_query, match.information,
-                        EdgeKind::kLocal})) {
+    const PoseGraphEdge edge{match.match_id, keyframe.id, match.T_match_query, match.information,
+                             EdgeKind::kLocal};
+    if (addEdge(edge)) {
+      // An edge far from closed (drift accumulated between keyframes far apart in the graph)
+      // is a loop in effect: the correction must spread over the whole graph.
+      if (edgeChi2(edge) > config_.full_optimization_chi2) update.full_optimization = true;
       ++update.num_local_edges;
       ++num_local_edges_;
+      added.push_back(match);
     }
   }
+  return added;
 }
 
 void Backend::tryRelocalization(const Keyframe& keyframe, BackendUpdate& update) {
@@ -101,8 +147,8 @@ void Backend::tryRelocalization(const Keyframe& keyframe, BackendUpdate& update)
   update.relocalization.query_id = keyframe.id;
   if (update.relocalization.status != LoopStatus::kLoopFound) return;
   const LoopDetection& match = update.relocalization;
-  if (!graph_.addEdge({match.match_id, keyframe.id, match.T_match_query, match.information,
-                       EdgeKind::kRelocalization})) {
+  if (!addEdge({match.match_id, keyframe.id, match.T_match_query, match.information,
+                EdgeKind::kRelocalization})) {
     return;
   }
   // Move the whole new segment rigidly next to the match before optimising: the weak tie gives
@@ -151,33 +197,40 @@ BackendUpdate Backend::add(const KeyframePtr& keyframe, const Matrix6d* covarian
         if (information.allFinite()) edge.information = 0.5 * (information + information.transpose());
       }
     }
-    graph_.addEdge(edge);
+    addEdge(edge);
   }
   keyframes_[keyframe->id] = info;
   segment_parent_.emplace(keyframe->segment, keyframe->segment);
 
   bool changed = false;
-  bool loop_or_relocalization = false;
+  bool full = false;  // a correction the local window cannot absorb
   // Relocalisation first: once the segment is joined, this keyframe's local edges can reach the
   // map it joined.
   if (config_.relocalization && segmentRoot(keyframe->segment) != segmentRoot(first_segment_)) {
     tryRelocalization(*keyframe, update);
     changed = changed || update.relocalized;
-    loop_or_relocalization = update.relocalized;
+    full = update.relocalized;
   }
   update.relocalization_pending = segmentRoot(keyframe->segment) != segmentRoot(first_segment_);
 
-  addLocalEdges(*keyframe, update);
+  const std::vector<LoopDetection> local = addLocalEdges(*keyframe, update);
+  full = full || update.full_optimization;
   changed = changed || (config_.optimize_every_keyframe && update.num_local_edges > 0);
 
   previous_ = keyframe;
-  update.loop = detector_.processKeyframe(*keyframe);
-  if (update.loop.status == LoopStatus::kLoopFound &&
-      graph_.addEdge({update.loop.match_id, update.loop.query_id, update.loop.T_match_query,
-                      update.loop.information, EdgeKind::kLoop})) {
+  update.loop = detector_.processKeyframe(*keyframe, local);
+  const PoseGraphEdge loop_edge{update.loop.match_id, update.loop.query_id,
+                                update.loop.T_match_query, update.loop.information,
+                                EdgeKind::kLoop};
+  // A loop to a keyframe this one already has a local edge with is that edge (the same
+  // measurement): counted as a loop, not added twice.
+  const bool duplicate = std::any_of(local.begin(), local.end(), [&](const LoopDetection& d) {
+    return d.match_id == update.loop.match_id;
+  });
+  if (update.loop.status == LoopStatus::kLoopFound && (duplicate || addEdge(loop_edge))) {
     ++num_loops_;
     changed = true;
-    loop_or_relocalization = true;
+    full = full || (!duplicate && edgeChi2(loop_edge) > config_.full_optimization_chi2);
     // A loop into another segment joins the two maps as a relocalisation does.
     const auto match = keyframes_.find(update.loop.match_id);
     if (match != keyframes_.end()) {
@@ -187,11 +240,14 @@ BackendUpdate Backend::add(const KeyframePtr& keyframe, const Matrix6d* covarian
     }
   }
   if (changed) {
-    PoseGraphOptions options = options_;
-    if (!loop_or_relocalization) {
+    if (full || config_.local_window_hops == 0) {
+      update.optimization = graph_.optimize(options_);
+      update.full_optimization = true;
+    } else {
+      PoseGraphOptions options = options_;
       options.max_iterations = std::min(options.max_iterations, config_.local_max_iterations);
+      update.optimization = graph_.optimize(options, localWindow(keyframe->id));
     }
-    update.optimization = graph_.optimize(options);
     update.optimized = true;
     update.corrected_poses.reserve(graph_.numNodes());
     for (std::int64_t id : graph_.nodeIds()) update.corrected_poses.emplace_back(id, graph_.pose(id));

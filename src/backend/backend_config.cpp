@@ -63,6 +63,8 @@ BackendConfig BackendConfig::load(Config& config) {
   c.local_max_candidates =
       config.getInt("backend.local_max_candidates", c.local_max_candidates, 1, 200);
   c.local_min_inliers = config.getInt("backend.local_min_inliers", c.local_min_inliers, 6, 10000);
+  c.local_search_radius_px = config.getDouble("backend.local_search_radius_px",
+                                              c.local_search_radius_px, 2.0, 1000.0);
   c.local_max_discrepancy_m = config.getDouble("backend.local_max_discrepancy_m",
                                                c.local_max_discrepancy_m, 0.0, 100.0);
   c.local_max_discrepancy_ratio = config.getDouble("backend.local_max_discrepancy_ratio",
@@ -77,6 +79,11 @@ BackendConfig BackendConfig::load(Config& config) {
       config.getBool("backend.optimize_every_keyframe", c.optimize_every_keyframe);
   c.local_max_iterations =
       config.getInt("backend.local_max_iterations", c.local_max_iterations, 1, 1000);
+  c.local_window_hops = config.getInt("backend.local_window_hops", c.local_window_hops, 0, 100);
+  c.local_window_size =
+      config.getInt("backend.local_window_size", c.local_window_size, 2, 100000);
+  c.full_optimization_chi2 = config.getDouble("backend.full_optimization_chi2",
+                                              c.full_optimization_chi2, 0.0, 1e12);
   c.relocalization = config.getBool("backend.relocalization", c.relocalization);
   c.relocalization_min_inliers = config.getInt("backend.relocalization_min_inliers",
                                                c.relocalization_min_inliers, 6, 10000);

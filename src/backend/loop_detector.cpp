@@ -5,6 +5,8 @@
 #include <cmath>
 #include <limits>
 
+#include <opencv2/features2d.hpp>
+
 #include "slamd/tracking/motion_estimation.hpp"
 
 namespace slamd {
@@ -69,43 +71,98 @@ std::vector<LoopDetector::Candidate> LoopDetector::retrieve(const BowVector& bow
 
 bool LoopDetector::verify(const FeatureSet& query, const CameraIntrinsics& intrinsics,
                           const Entry& e, LoopDetection& detection, int min_inliers,
-                          double min_sigma_m, double min_sigma_rad) {
+                          double min_sigma_m, double min_sigma_rad,
+                          const SE3* T_match_query_prior) {
   const FeatureSet& ref = e.features;
+  // Descriptors of the features with depth, on both sides.
+  const auto withDepth = [](const FeatureSet& features, std::vector<int>& rows) {
+    cv::Mat descriptors;
+    for (std::size_t j = 0; j < features.size(); ++j) {
+      if (!features.hasDepth(j)) continue;
+      rows.push_back(static_cast<int>(j));
+      descriptors.push_back(features.descriptors.row(static_cast<int>(j)));
+    }
+    return descriptors;
+  };
   std::vector<int> ref_rows;
-  std::vector<BinaryDescriptor> ref_descriptors;
-  for (std::size_t j = 0; j < ref.size(); ++j) {
-    if (!ref.hasDepth(j)) continue;
-    ref_rows.push_back(static_cast<int>(j));
-    ref_descriptors.push_back(binaryDescriptorRow(ref.descriptors, static_cast<int>(j)));
-  }
-  if (ref_rows.size() < 3) return false;
+  std::vector<int> query_rows;
+  const cv::Mat ref_descriptors = withDepth(ref, ref_rows);
+  const cv::Mat query_descriptors = withDepth(query, query_rows);
+  if (ref_rows.size() < 3 || query_rows.size() < 3) return false;
 
-  // Nearest neighbour with a ratio test; each reference feature keeps its closest query feature.
   std::vector<int> best_query(ref.size(), -1);
   std::vector<int> best_query_distance(ref.size(), std::numeric_limits<int>::max());
-  for (std::size_t i = 0; i < query.size(); ++i) {
-    if (!query.hasDepth(i)) continue;
-    const BinaryDescriptor d = binaryDescriptorRow(query.descriptors, static_cast<int>(i));
-    int best = -1;
-    int best_distance = 257;
-    int second_distance = 257;
-    for (std::size_t k = 0; k < ref_descriptors.size(); ++k) {
-      const int distance = hammingDistance(d, ref_descriptors[k]);
-      if (distance < best_distance) {
-        second_distance = best_distance;
-        best_distance = distance;
-        best = ref_rows[k];
-      } else if (distance < second_distance) {
-        second_distance = distance;
-      }
-    }
-    if (best < 0 || best_distance > config_.loop_max_descriptor_distance ||
+  const auto keep = [&](std::size_t ref_row, int query_row, int best_distance,
+                        int second_distance) {
+    if (best_distance > config_.loop_max_descriptor_distance ||
         best_distance >= config_.loop_match_ratio * second_distance) {
-      continue;
+      return;
     }
-    if (best_distance < best_query_distance[static_cast<std::size_t>(best)]) {
-      best_query_distance[static_cast<std::size_t>(best)] = best_distance;
-      best_query[static_cast<std::size_t>(best)] = static_cast<int>(i);
+    if (best_distance < best_query_distance[ref_row]) {
+      best_query_distance[ref_row] = best_distance;
+      best_query[ref_row] = query_row;
+    }
+  };
+  if (T_match_query_prior != nullptr) {
+    // Guided: each reference point is projected with the prior and compared with the query
+    // features near its projection only (a grid over the query pixels), with the ratio test
+    // among those. Far cheaper than all pairs, and it cannot pick a look-alike elsewhere.
+    constexpr double kCellPx = 32.0;
+    const double radius_px = config_.local_search_radius_px;
+    const int cols = static_cast<int>(intrinsics.width / kCellPx) + 1;
+    const int rows = static_cast<int>(intrinsics.height / kCellPx) + 1;
+    std::vector<std::vector<int>> grid(static_cast<std::size_t>(cols * rows));
+    std::vector<BinaryDescriptor> query_binary(query.size());
+    for (int q : query_rows) {
+      const Eigen::Vector2d& uv = query.pixels[static_cast<std::size_t>(q)];
+      const int cx = static_cast<int>(uv.x() / kCellPx);
+      const int cy = static_cast<int>(uv.y() / kCellPx);
+      if (cx < 0 || cy < 0 || cx >= cols || cy >= rows) continue;
+      grid[static_cast<std::size_t>(cy * cols + cx)].push_back(q);
+      query_binary[static_cast<std::size_t>(q)] = binaryDescriptorRow(query.descriptors, q);
+    }
+    const SE3 T_query_match = T_match_query_prior->inverse();
+    for (int j : ref_rows) {
+      const Eigen::Vector3d p = T_query_match * ref.points[static_cast<std::size_t>(j)];
+      if (p.z() <= 0.0) continue;
+      const Eigen::Vector2d uv = intrinsics.project(p);
+      const BinaryDescriptor d = binaryDescriptorRow(ref.descriptors, j);
+      int best = -1, best_distance = 257, second_distance = 257;
+      const int x0 = std::max(0, static_cast<int>((uv.x() - radius_px) / kCellPx));
+      const int x1 = std::min(cols - 1, static_cast<int>((uv.x() + radius_px) / kCellPx));
+      const int y0 = std::max(0, static_cast<int>((uv.y() - radius_px) / kCellPx));
+      const int y1 = std::min(rows - 1, static_cast<int>((uv.y() + radius_px) / kCellPx));
+      for (int cy = y0; cy <= y1; ++cy) {
+        for (int cx = x0; cx <= x1; ++cx) {
+          for (int q : grid[static_cast<std::size_t>(cy * cols + cx)]) {
+            if ((query.pixels[static_cast<std::size_t>(q)] - uv).squaredNorm() >
+                radius_px * radius_px) {
+              continue;
+            }
+            const int distance = hammingDistance(d, query_binary[static_cast<std::size_t>(q)]);
+            if (distance < best_distance) {
+              second_distance = best_distance;
+              best_distance = distance;
+              best = q;
+            } else if (distance < second_distance) {
+              second_distance = distance;
+            }
+          }
+        }
+      }
+      if (best >= 0) keep(static_cast<std::size_t>(j), best, best_distance, second_distance);
+    }
+  } else {
+    // Nearest neighbour over all pairs with a ratio test (OpenCV's brute-force Hamming matcher:
+    // SIMD popcount); each reference feature keeps its closest query feature.
+    std::vector<std::vector<cv::DMatch>> knn;
+    cv::BFMatcher(cv::NORM_HAMMING).knnMatch(query_descriptors, ref_descriptors, knn, 2);
+    for (const std::vector<cv::DMatch>& pair : knn) {
+      if (pair.empty()) continue;
+      keep(static_cast<std::size_t>(ref_rows[static_cast<std::size_t>(pair[0].trainIdx)]),
+           query_rows[static_cast<std::size_t>(pair[0].queryIdx)],
+           static_cast<int>(pair[0].distance),
+           pair.size() > 1 ? static_cast<int>(pair[1].distance) : 257);
     }
   }
   std::vector<Correspondence> matches;
@@ -151,7 +208,8 @@ bool LoopDetector::verify(const FeatureSet& query, const CameraIntrinsics& intri
   return true;
 }
 
-LoopDetection LoopDetector::processKeyframe(const Keyframe& keyframe) {
+LoopDetection LoopDetector::processKeyframe(const Keyframe& keyframe,
+                                           const std::vector<LoopDetection>& already_verified) {
   const auto start = std::chrono::steady_clock::now();
   LoopDetection detection;
   detection.query_id = keyframe.id;
@@ -202,8 +260,18 @@ LoopDetection LoopDetector::processKeyframe(const Keyframe& keyframe) {
     LoopDetection attempt = detection;
     attempt.score = candidate.score;
     const Entry& entry = entries_[static_cast<std::size_t>(candidate.entry)];
-    if (!verify(keyframe.features, keyframe.intrinsics, entry, attempt, config_.loop_min_inliers,
-                kMinSigmaM, kMinSigmaRad)) {
+    const auto known = std::find_if(
+        already_verified.begin(), already_verified.end(),
+        [&](const LoopDetection& d) { return d.match_id == entry.id; });
+    if (known != already_verified.end() && known->num_inliers >= config_.loop_min_inliers) {
+      // Verified moments ago (a local edge): the same images, no need to match them again.
+      attempt.match_id = known->match_id;
+      attempt.T_match_query = known->T_match_query;
+      attempt.information = known->information;
+      attempt.num_matches = known->num_matches;
+      attempt.num_inliers = known->num_inliers;
+    } else if (!verify(keyframe.features, keyframe.intrinsics, entry, attempt,
+                       config_.loop_min_inliers, kMinSigmaM, kMinSigmaRad)) {
       if (!have_best && attempt.num_inliers > best.num_inliers) best = attempt;
       continue;
     }
@@ -296,7 +364,8 @@ LoopDetection LoopDetector::query(const FeatureSet& features, const CameraIntrin
 }
 
 std::vector<LoopDetection> LoopDetector::matchLocal(const Keyframe& keyframe,
-                                                    const KeyframeFilter& allowed) {
+                                                    const KeyframeFilter& allowed,
+                                                    const PosePrior& prior) {
   std::vector<LoopDetection> matches;
   if (!hasBinaryDescriptors(keyframe.features) || vocabulary_ == nullptr ||
       vocabulary_->empty() || entries_.empty()) {
@@ -311,10 +380,12 @@ std::vector<LoopDetection> LoopDetector::matchLocal(const Keyframe& keyframe,
     LoopDetection attempt;
     attempt.query_id = keyframe.id;
     attempt.score = candidate.score;
-    if (verify(keyframe.features, keyframe.intrinsics,
-               entries_[static_cast<std::size_t>(candidate.entry)], attempt,
-               config_.local_min_inliers, config_.local_min_sigma_m,
-               config_.local_min_sigma_rad)) {
+    const Entry& entry = entries_[static_cast<std::size_t>(candidate.entry)];
+    SE3 T_prior = SE3::Identity();
+    const bool have_prior = prior && prior(entry.id, T_prior);
+    if (verify(keyframe.features, keyframe.intrinsics, entry, attempt, config_.local_min_inliers,
+               config_.local_min_sigma_m, config_.local_min_sigma_rad,
+               have_prior ? &T_prior : nullptr)) {
       attempt.status = LoopStatus::kLoopFound;
       matches.push_back(attempt);
       // Enough edges: the remaining candidates would only cost verification time.

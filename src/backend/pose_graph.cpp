@@ -157,6 +157,20 @@ double PoseGraph::cost(const PoseGraphOptions& options) const {
   return total;
 }
 
+PoseGraphResult PoseGraph::optimize(const PoseGraphOptions& options,
+                                    const std::vector<std::int64_t>& free_ids) {
+  const std::vector<bool> saved = fixed_;
+  std::vector<bool> window(ids_.size(), false);
+  for (std::int64_t id : free_ids) {
+    const auto it = index_.find(id);
+    if (it != index_.end()) window[static_cast<std::size_t>(it->second)] = true;
+  }
+  for (std::size_t n = 0; n < ids_.size(); ++n) fixed_[n] = saved[n] || !window[n];
+  PoseGraphResult result = optimize(options);
+  fixed_ = saved;
+  return result;
+}
+
 PoseGraphResult PoseGraph::optimize(const PoseGraphOptions& options) {
   using Clock = std::chrono::steady_clock;
   const auto start = Clock::now();
@@ -237,6 +251,7 @@ OptimizationStatus PoseGraph::levenbergMarquardt(const PoseGraphOptions& options
       for (const PoseGraphEdge& edge : edges_) {
         const int ni = index_.at(edge.from_id);
         const int nj = index_.at(edge.to_id);
+        if (block[ni] < 0 && block[nj] < 0) continue;  // both held: a constant
         Matrix6d Ji, Jj;
         const Vector6d e = poseGraphEdgeError(edge.T_from_to, poses_[ni], poses_[nj], &Ji, &Jj);
         double w = 1.0;

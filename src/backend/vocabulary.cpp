@@ -15,9 +15,22 @@
 
 namespace slamd {
 
+namespace {
+
+// Bit count of a 64-bit word without the POPCNT instruction (the build targets baseline x86-64,
+// where __builtin_popcountll becomes a slow library call): the classic SWAR reduction.
+inline int popcount64(std::uint64_t x) {
+  x = x - ((x >> 1) & 0x5555555555555555ull);
+  x = (x & 0x3333333333333333ull) + ((x >> 2) & 0x3333333333333333ull);
+  x = (x + (x >> 4)) & 0x0f0f0f0f0f0f0f0full;
+  return static_cast<int>((x * 0x0101010101010101ull) >> 56);
+}
+
+}  // namespace
+
 int hammingDistance(const BinaryDescriptor& a, const BinaryDescriptor& b) {
-  return __builtin_popcountll(a[0] ^ b[0]) + __builtin_popcountll(a[1] ^ b[1]) +
-         __builtin_popcountll(a[2] ^ b[2]) + __builtin_popcountll(a[3] ^ b[3]);
+  return popcount64(a[0] ^ b[0]) + popcount64(a[1] ^ b[1]) + popcount64(a[2] ^ b[2]) +
+         popcount64(a[3] ^ b[3]);
 }
 
 BinaryDescriptor binaryDescriptorRow(const cv::Mat& descriptors, int row) {
@@ -289,7 +302,8 @@ void Vocabulary::write(std::ostream& out) const {
   put(header, static_cast<std::int64_t>(nodes_.size()));
   put(header, static_cast<std::int64_t>(num_words_));
   put(header, static_cast<std::uint64_t>(payload.size()));
-  put(payload, fnv1a(payload));
+  // The checksum covers the header fields after the magic and the payload.
+  put(payload, fnv1a(header.substr(sizeof(kMagic)) + payload));
   out.write(header.data(), static_cast<std::streamsize>(header.size()));
   out.write(payload.data(), static_cast<std::streamsize>(payload.size()));
 }
@@ -304,7 +318,7 @@ bool Vocabulary::read(std::istream& in, std::string* error) {
   if (!in.read(header.data(), static_cast<std::streamsize>(header.size()))) {
     return fail(error, "truncated header");
   }
-  Reader h(header);
+  Reader h(header);  // header holds the fields after the magic
   std::uint32_t version = 0, branching = 0, depth = 0;
   std::int64_t num_nodes = 0, num_words = 0;
   std::uint64_t payload_size = 0;
@@ -337,7 +351,7 @@ bool Vocabulary::read(std::istream& in, std::string* error) {
     return fail(error, "truncated (expected " + std::to_string(payload_size + 8) +
                            " bytes after the header)");
   }
-  if (fnv1a(payload) != checksum) return fail(error, "checksum mismatch (corrupt file)");
+  if (fnv1a(header + payload) != checksum) return fail(error, "checksum mismatch (corrupt file)");
 
   Reader r(payload);
   std::vector<Node> nodes(static_cast<std::size_t>(num_nodes));

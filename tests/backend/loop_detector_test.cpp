@@ -226,10 +226,135 @@ TEST(Backend, ClosingTheRingLoopPullsTheDriftedKeyframesBackAndRelocalises) {
   std::printf("ring keyframes: RMS position error %.3f m -> %.3f m, last keyframe %.3f m -> "
               "%.3f m\n", before, after, end_before, end_after);
   EXPECT_GE(backend.numLoops(), 1);
-  EXPECT_EQ(optimisations, backend.numLoops());
+  EXPECT_GT(backend.numLocalEdges(), 0);
+  // Every keyframe that brought an edge (local or loop) was followed by an optimisation.
+  EXPECT_GE(optimisations, backend.numLoops());
   EXPECT_LT(end_after, 0.1);
   EXPECT_LT(after, before / 2.0);
   expectRelocalisation(world, backend.loopDetector());
+}
+
+TEST(Backend, WithoutLocalEdgesOptimisesOnlyOnLoops) {
+  const RenderedKeyframes& world = ringKeyframes();
+  BackendConfig config;
+  config.local_edges = 0;
+  Backend backend(config, roomVocabulary());
+  int optimisations = 0;
+  for (const KeyframePtr& kf : world.keyframes) {
+    const BackendUpdate u = backend.addKeyframe(kf);
+    EXPECT_EQ(u.num_local_edges, 0);
+    if (u.optimized) ++optimisations;
+  }
+  EXPECT_GE(backend.numLoops(), 1);
+  EXPECT_EQ(optimisations, backend.numLoops());
+  EXPECT_EQ(backend.numLocalEdges(), 0);
+}
+
+// A copy of `keyframe` as a new tracking segment would report it: its own odometry world
+// (T_odometry_world applied to the pose), segment `segment`.
+KeyframePtr inNewSegment(const KeyframePtr& keyframe, std::int64_t segment,
+                         const SE3& T_odometry_world, bool drop_features = false) {
+  auto copy = std::make_shared<Keyframe>(*keyframe);
+  copy->segment = segment;
+  copy->T_world_camera = T_odometry_world * keyframe->T_world_camera;
+  if (drop_features) copy->features = FeatureSet();
+  return copy;
+}
+
+struct SegmentRun {
+  double rms_after_m = 0.0;  ///< RMS position error of the new segment's corrected keyframes
+  std::vector<BackendUpdate> updates;
+  int relocalizations = 0;
+};
+
+// The ring's first 50 keyframes in segment 0, then (as if tracking was lost) keyframes 44..79 in
+// segment 1 whose odometry world is 2 m and 40 degrees away from the map's. The first keyframe of
+// segment 1 has no features (nothing to match), so relocalisation must wait for the second.
+SegmentRun runWithLostTracking(bool relocalization) {
+  const RenderedKeyframes& world = ringKeyframes();
+  BackendConfig config;
+  config.relocalization = relocalization;
+  Backend backend(config, roomVocabulary());
+  const SE3 T_odometry_world =
+      SE3(Eigen::Translation3d(2.0, -1.0, 0.3) *
+          Eigen::AngleAxisd(40.0 * M_PI / 180.0, Eigen::Vector3d::UnitZ()));
+  SegmentRun run;
+  for (std::size_t k = 0; k < 50; ++k) backend.addKeyframe(world.keyframes[k]);
+  for (std::size_t k = 44; k < 80; ++k) {
+    // Ids keep increasing across segments, as tracking numbers them.
+    auto kf = std::make_shared<Keyframe>(
+        *inNewSegment(world.keyframes[k], 1, T_odometry_world, k == 44));
+    kf->id = static_cast<std::int64_t>(50 + (k - 44));
+    run.updates.push_back(backend.addKeyframe(kf));
+    if (run.updates.back().relocalized) ++run.relocalizations;
+  }
+  double sum = 0.0;
+  for (std::size_t k = 44; k < 80; ++k) {
+    const std::int64_t id = static_cast<std::int64_t>(50 + (k - 44));
+    const double e = (backend.pose(id).translation() - world.truth[k].translation()).norm();
+    sum += e * e;
+  }
+  run.rms_after_m = std::sqrt(sum / 36.0);
+  return run;
+}
+
+TEST(Backend, RelocalisationPutsANewTrackingSegmentBackIntoTheMap) {
+  const SegmentRun run = runWithLostTracking(true);
+  std::printf("lost tracking: new segment RMS error %.3f m with relocalisation\n",
+              run.rms_after_m);
+  // The featureless first keyframe tries and fails; the next one relocalises.
+  ASSERT_GE(run.updates.size(), 2u);
+  EXPECT_TRUE(run.updates[0].relocalization_attempted);
+  EXPECT_FALSE(run.updates[0].relocalized);
+  EXPECT_TRUE(run.updates[0].relocalization_pending);
+  EXPECT_EQ(run.updates[0].relocalization_attempts, 1);
+  EXPECT_TRUE(run.updates[1].relocalized);
+  EXPECT_EQ(run.updates[1].relocalization_attempts, 2);
+  EXPECT_TRUE(run.updates[1].optimized);
+  EXPECT_FALSE(run.updates[1].relocalization_pending);
+  EXPECT_GE(run.updates[1].relocalization.match_id, 0);
+  EXPECT_LT(run.updates[1].relocalization.match_id, 50);  // a keyframe of the first segment
+  EXPECT_EQ(run.relocalizations, 1);
+  // Once joined, no more attempts; T_world_odometry maps the segment's odometry into the map.
+  for (std::size_t u = 2; u < run.updates.size(); ++u) {
+    EXPECT_FALSE(run.updates[u].relocalization_attempted);
+    EXPECT_FALSE(run.updates[u].relocalization_pending);
+  }
+  EXPECT_LT(run.rms_after_m, 0.15);
+}
+
+TEST(Backend, WithoutRelocalisationANewSegmentStaysInItsOwnWorld) {
+  const SegmentRun run = runWithLostTracking(false);
+  std::printf("lost tracking: new segment RMS error %.3f m without relocalisation\n",
+              run.rms_after_m);
+  EXPECT_EQ(run.relocalizations, 0);
+  for (const BackendUpdate& u : run.updates) EXPECT_FALSE(u.relocalization_attempted);
+  EXPECT_TRUE(run.updates.back().relocalization_pending);
+  EXPECT_GT(run.rms_after_m, 1.0);
+}
+
+TEST(Backend, LocalMatchesThatDisagreeWithTheGraphAreRejected) {
+  const RenderedKeyframes& world = ringKeyframes();
+  BackendConfig config;
+  // Unguided matching: guided by the graph, a false match would not even be found.
+  config.local_search_radius_px = 1000.0;
+  Backend backend(config, roomVocabulary());
+  int with_local_edges = 0;
+  for (std::size_t k = 0; k < 30; ++k) {
+    const BackendUpdate u = backend.addKeyframe(world.keyframes[k]);
+    if (u.num_local_edges > 0) ++with_local_edges;
+    EXPECT_EQ(u.num_local_rejected, 0) << k;  // true matches agree with the odometry
+  }
+  // Keyframes two or more apart overlap except around the ring's corners.
+  EXPECT_GE(with_local_edges, 20);
+  // Keyframe 30 with a 1 m odometry jump: the images still match keyframes 27, 28 (etc.), but the
+  // relative poses disagree with the graph by 1 m, as a false match would.
+  auto jumped = std::make_shared<Keyframe>(*world.keyframes[30]);
+  jumped->T_world_camera =
+      world.keyframes[30]->T_world_camera * SE3(Eigen::Translation3d(1.0, 0.0, 0.0));
+  const BackendUpdate u = backend.addKeyframe(jumped);
+  EXPECT_EQ(u.num_local_edges, 0);
+  EXPECT_GT(u.num_local_rejected, 0);
 }
 
 TEST(LoopDetector, RejectsNonBinaryDescriptors) {

@@ -28,7 +28,9 @@
 // of the same map that look alike (recent ones included) and verified with RANSAC + refinement;
 // an edge whose relative pose agrees with the current graph estimate is added with the
 // refinement's information. The graph is then re-optimised (backend.optimize_every_keyframe),
-// warm-started from the previous solution, so each optimisation takes a few iterations.
+// warm-started from the previous solution, over a local window (the keyframe and its neighbours
+// within backend.local_window_hops edges); a loop or relocalisation that is far from closed
+// re-optimises the whole graph. corrected_poses lists every keyframe either way.
 //
 // Relocalisation (backend.relocalization): a keyframe starting a new segment (after LOST) is tied
 // to the previous one by a very weak edge only, and matched against every keyframe of earlier
@@ -56,6 +58,9 @@ struct BackendUpdate {
   LoopDetection loop;               ///< the loop search for this keyframe
   bool optimized = false;           ///< a loop was added and the graph re-optimised
   PoseGraphResult optimization;     ///< valid when optimized
+  /// The optimisation moved the whole graph (a loop or relocalisation that was far from closed),
+  /// not only the local window around this keyframe.
+  bool full_optimization = false;
   int num_local_edges = 0;          ///< local (covisibility) edges added for this keyframe
   int num_local_rejected = 0;       ///< verified local matches that disagreed with the graph
   /// This keyframe's segment was joined to the map by a relocalisation now.
@@ -107,8 +112,15 @@ class Backend {
 
   BackendUpdate add(const KeyframePtr& keyframe, const Matrix6d* covariance_prev_curr);
   Matrix6d odometryInformation(const SE3& T_prev_curr) const;
-  void addLocalEdges(const Keyframe& keyframe, BackendUpdate& update);
+  /// Returns the verified local matches (those that became edges).
+  std::vector<LoopDetection> addLocalEdges(const Keyframe& keyframe, BackendUpdate& update);
   void tryRelocalization(const Keyframe& keyframe, BackendUpdate& update);
+  /// Adds an edge to the graph and the adjacency.
+  bool addEdge(const PoseGraphEdge& edge);
+  /// The new keyframe and its neighbours within backend.local_window_hops, nearest first.
+  std::vector<std::int64_t> localWindow(std::int64_t keyframe_id) const;
+  /// Whitened squared error of an edge at the current estimate.
+  double edgeChi2(const PoseGraphEdge& edge) const;
 
   BackendConfig config_;
   PoseGraphOptions options_;
@@ -116,6 +128,7 @@ class Backend {
   LoopDetector detector_;
   KeyframePtr previous_;  ///< the latest keyframe added
   std::unordered_map<std::int64_t, KeyframeInfo> keyframes_;
+  std::unordered_map<std::int64_t, std::vector<std::int64_t>> neighbours_;  ///< graph adjacency
   std::unordered_map<std::int64_t, std::int64_t> segment_parent_;  ///< joined segments (union-find)
   std::int64_t first_segment_ = 0;
   int relocalization_attempts_ = 0;  ///< attempts of the latest segment

@@ -115,6 +115,9 @@ struct BackendConfig {
   /// backend.local_min_inliers (int, default 30, range [6, 10000]): inliers after refinement for
   /// a local edge.
   int local_min_inliers = 30;
+  /// backend.local_search_radius_px (double, default 40, range [2, 1000], pixels): local edges
+  /// match descriptors only this far from where the graph's estimate projects each point.
+  double local_search_radius_px = 40.0;
   /// backend.local_max_discrepancy_m (double, default 0.15, range [0, 100], metres) and
   /// backend.local_max_discrepancy_ratio (double, default 0.05, range [0, 10], metres per metre
   /// travelled): a local edge is rejected when its translation disagrees with the current graph
@@ -133,6 +136,19 @@ struct BackendConfig {
   /// backend.optimize_every_keyframe (bool, default true): re-optimise after every keyframe that
   /// brought a local edge (otherwise only after loops and relocalisations).
   bool optimize_every_keyframe = true;
+  /// backend.local_window_hops (int, default 2, range [0, 100]) and backend.local_window_size
+  /// (int, default 40, range [2, 100000], keyframes): an optimisation brought by local edges (or
+  /// by a loop that is already nearly closed) moves only the new keyframe and the keyframes
+  /// within this many edges of it (at most local_window_size, nearest first); the rest of the
+  /// graph is held. A scene revisited constantly connects every keyframe to every other, and
+  /// the factorisation of the whole graph grows nearly cubically with its size. 0 hops = always
+  /// optimise the whole graph.
+  int local_window_hops = 2;
+  int local_window_size = 40;
+  /// backend.full_optimization_chi2 (double, default 50, range [0, 1e12], whitened squared
+  /// error): a loop (or relocalisation) edge whose error at the current estimate exceeds this
+  /// re-optimises the whole graph; below, the local window suffices.
+  double full_optimization_chi2 = 50.0;
   /// backend.local_max_iterations (int, default 10, range [1, 1000]): Levenberg-Marquardt
   /// iterations of an optimisation brought only by local edges (warm-started from the previous
   /// solution, it has little left to do); loops and relocalisations use max_iterations.

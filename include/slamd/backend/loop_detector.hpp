@@ -71,7 +71,11 @@ class LoopDetector {
 
   /// Looks for a loop between `keyframe` and the keyframes added before it, then adds it to the
   /// database. The keyframe's features need descriptors, undistorted pixels and 3D points.
-  LoopDetection processKeyframe(const Keyframe& keyframe);
+  /// `already_verified`: matches of this keyframe the caller verified itself (matchLocal()); a
+  /// candidate among them with at least backend.loop_min_inliers is not matched again (its
+  /// detection is then the caller's, with the caller's information matrix).
+  LoopDetection processKeyframe(const Keyframe& keyframe,
+                                const std::vector<LoopDetection>& already_verified = {});
 
   /// Best verified match of a frame's features among all stored keyframes (relocalisation):
   /// no recent-keyframe exclusion, no consistency, nothing stored. match_id < 0 when none.
@@ -79,6 +83,9 @@ class LoopDetector {
 
   /// Which stored keyframes a search may return: (keyframe id, tracking segment) -> allowed.
   using KeyframeFilter = std::function<bool(std::int64_t id, std::int64_t segment)>;
+  /// The caller's estimate of T_match_query for a stored keyframe id (guides the matching of
+  /// local edges), or false when it has none.
+  using PosePrior = std::function<bool(std::int64_t id, SE3& T_match_query)>;
 
   /// query() restricted to the stored keyframes `allowed` accepts (e.g. earlier tracking
   /// segments), with its own minimum of inliers (0 = backend.loop_min_inliers).
@@ -91,7 +98,10 @@ class LoopDetector {
   /// one is returned (status kLoopFound, best inliers first) with T_match_query and an
   /// information matrix from the refinement floored by backend.local_min_sigma_*. Nothing is
   /// stored and no consistency is required: the caller checks each against its pose estimate.
-  std::vector<LoopDetection> matchLocal(const Keyframe& keyframe, const KeyframeFilter& allowed);
+  /// With `prior`, descriptors are matched near the projections the prior predicts
+  /// (backend.local_search_radius_px) instead of over all pairs.
+  std::vector<LoopDetection> matchLocal(const Keyframe& keyframe, const KeyframeFilter& allowed,
+                                        const PosePrior& prior = PosePrior());
 
   std::size_t size() const { return entries_.size(); }
 
@@ -117,9 +127,11 @@ class LoopDetector {
                                   double min_score,
                                   const KeyframeFilter& allowed = KeyframeFilter()) const;
   /// Matches, RANSAC and refinement of the query against entry `e`; fills the geometric fields.
+  /// With a prior T_match_query, descriptors are matched near the predicted projections only
+  /// (backend.local_search_radius_px); without, over all pairs.
   bool verify(const FeatureSet& query, const CameraIntrinsics& intrinsics, const Entry& e,
               LoopDetection& detection, int min_inliers, double min_sigma_m,
-              double min_sigma_rad);
+              double min_sigma_rad, const SE3* T_match_query_prior = nullptr);
 
   BackendConfig config_;
   std::shared_ptr<const Vocabulary> vocabulary_;

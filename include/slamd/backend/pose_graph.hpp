@@ -101,6 +101,11 @@ class PoseGraph {
 
   /// Levenberg-Marquardt over all free nodes; updates the poses in place.
   PoseGraphResult optimize(const PoseGraphOptions& options);
+  /// The same over the listed nodes only (a local window): every other node is held at its pose
+  /// for this call (nodes fixed with setFixed stay fixed). Edges between held nodes are constant
+  /// and skipped; the cost reported still covers every edge. Unknown ids are ignored.
+  PoseGraphResult optimize(const PoseGraphOptions& options,
+                           const std::vector<std::int64_t>& free_ids);
 
   /// The robust cost of the current poses.
   double cost(const PoseGraphOptions& options) const;

@@ -63,7 +63,8 @@ class Vocabulary {
 
   /// Binary serialisation, format version kFileVersion (little-endian host layout): magic
   /// "SLAMDVOC", version, branching, depth, node and word counts, payload size, the nodes
-  /// (centre, word, children), the idf weights, and an FNV-1a checksum of the payload.
+  /// (centre, word, children), the idf weights, and an FNV-1a checksum of everything after the
+  /// magic.
   void write(std::ostream& out) const;
   /// Reads what write() wrote; false (and *error says why: not a vocabulary, unsupported
   /// version, truncated, checksum mismatch, inconsistent tree) on malformed input, leaving this

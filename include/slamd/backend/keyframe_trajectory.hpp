@@ -1,0 +1,49 @@
+#pragma once
+// KeyframeAnchoredTrajectory: the full per-frame trajectory of a run, corrected through the back
+// end. Each frame is stored as its odometry pose relative to its reference keyframe (the keyframe
+// tracking measured it against, else the latest keyframe of its segment); the corrected
+// trajectory composes the back end's corrected pose of that keyframe with the stored offset:
+//   T_world_frame = T_world_keyframe(corrected) * T_world_keyframe(odometry)^-1 * T_world_frame(odometry)
+//
+// Usage (one thread, no threads inside):
+//   KeyframeAnchoredTrajectory trajectory;
+//   for each OdometryResult r:
+//     if (r.keyframe) { trajectory.addKeyframe(r.keyframe); backend.addKeyframe(r.keyframe); }
+//     trajectory.addFrame(r);
+//   Trajectory slam = trajectory.corrected(backend);   // T_world_camera per frame, seconds
+//
+// Frames before the first keyframe are skipped.
+
+#include <cstdint>
+#include <unordered_map>
+#include <vector>
+
+#include "slamd/backend/backend.hpp"
+#include "slamd/common/trajectory.hpp"
+
+namespace slamd {
+
+class KeyframeAnchoredTrajectory {
+ public:
+  void addKeyframe(const KeyframePtr& keyframe);
+  /// Records the frame of one processFrame() result (after addKeyframe for its keyframe).
+  void addFrame(const OdometryResult& result);
+
+  std::size_t size() const { return frames_.size(); }
+  /// The frames as odometry reported them.
+  Trajectory odometry() const;
+  /// The frames through the keyframes' corrected poses.
+  Trajectory corrected(const Backend& backend) const;
+
+ private:
+  struct Frame {
+    double t_s = 0.0;
+    std::int64_t keyframe_id = -1;
+    SE3 T_world_camera = SE3::Identity();  ///< odometry
+  };
+  std::unordered_map<std::int64_t, KeyframePtr> keyframes_;
+  KeyframePtr latest_;
+  std::vector<Frame> frames_;
+};
+
+}  // namespace slamd
