@@ -69,7 +69,7 @@ std::vector<int> maximumConsistentClique(const std::vector<Correspondence>& matc
 
 struct RefinementOptions {
   int max_iterations = 10;
-  double huber_k = 2.0;             ///< Huber width, in sigmas
+  double huber_k = 1.5;             ///< Huber width, in sigmas
   double depth_sigma_coeff = 0.0015;///< sigma_z = coeff * z^2 (1/m); 0 = no depth residual
   /// Estimate the noise of the reprojection and of the depth residuals from the data (robustly,
   /// from the median residual at the initial pose) and whiten each kind by its own scale, so

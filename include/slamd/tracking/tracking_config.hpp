@@ -110,8 +110,9 @@ struct TrackingConfig {
   /// the reprojection and depth residuals (median residual) and weighs each kind by it, instead
   /// of trusting pixel_sigma_px and depth_sigma_coeff as they are.
   bool estimate_noise_scale = true;
-  /// tracking.huber_k (double, default 2.0, range [0.1, 100], sigmas): Huber kernel width.
-  double huber_k = 2.0;
+  /// tracking.huber_k (double, default 1.5, range [0.1, 100], sigmas): Huber kernel width (in
+  /// estimated sigmas with estimate_noise_scale; near the textbook 1.345).
+  double huber_k = 1.5;
 
   /// tracking.joint_references (int, default -1, range [-1, 10]): after tracking the keyframe,
   /// the pose is refined jointly against this many more recent keyframes, their odometry poses
