@@ -1,7 +1,7 @@
 // TUM fr1/xyz: the first 150 frames with each fast front end, and the whole sequence with orb
 // against issue 6's targets (ATE <= 0.025 m, RPE(1 s) <= 0.020 m). Measured (release build):
 // 150 frames ATE orb 0.012 m, fovis 0.014 m (before the joint refinement and noise scales:
-// 0.026 and 0.018); whole sequence orb ATE 0.014 m, RPE 0.016 m (before: 0.032 and 0.025).
+// 0.026 and 0.018); whole sequence orb ATE 0.0135 m, RPE 0.0163 m (before: 0.032 and 0.025).
 
 #include <gtest/gtest.h>
 #include <opencv2/core.hpp>
