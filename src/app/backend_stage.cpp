@@ -18,10 +18,9 @@ BackendStage::BackendStage(const BackendConfig& config,
 
 void BackendStage::reset() {
   backend_ = std::make_unique<Backend>(config_, vocabulary_);
-  anchors_.clear();
+  frames_ = KeyframeAnchoredTrajectory();
   keyframes_.clear();
   latest_keyframe_id_ = -1;
-  T_world_latest_keyframe_ = SE3::Identity();
   stats_ = BackendStageStats();
 }
 
@@ -48,15 +47,14 @@ std::optional<BackendCorrection> BackendStage::process(const EstimatedPacket& pa
             : backend_->addKeyframe(keyframe);
     ++stats_.keyframes;
     latest_keyframe_id_ = keyframe->id;
-    T_world_latest_keyframe_ = T_world_camera;
+    frames_.addKeyframe(keyframe);
     keyframes_.push_back(KeyframePoseEntry{keyframe->id, keyframe->utime, keyframe->segment,
                                            T_world_camera});
     if (update.optimized) correction = makeCorrection(update, keyframe->utime);
   }
-  if (latest_keyframe_id_ >= 0) {
-    anchors_.push_back(FrameAnchor{utimeToSeconds(packet.pose.utime), latest_keyframe_id_,
-                                   T_world_latest_keyframe_.inverse() * T_world_camera});
-  }
+  OdometryResult filtered = odometry;
+  filtered.T_world_camera = T_world_camera;
+  frames_.addFrame(filtered);
   return correction;
 }
 
@@ -101,14 +99,6 @@ BackendCorrection BackendStage::makeCorrection(const BackendUpdate& update, Utim
   return correction;
 }
 
-Trajectory BackendStage::optimizedTrajectory() const {
-  Trajectory trajectory;
-  trajectory.reserve(anchors_.size());
-  for (const FrameAnchor& anchor : anchors_) {
-    trajectory.push_back(StampedPose{anchor.timestamp_s,
-                                     backend_->pose(anchor.keyframe_id) * anchor.T_keyframe_camera});
-  }
-  return trajectory;
-}
+Trajectory BackendStage::optimizedTrajectory() const { return frames_.corrected(*backend_); }
 
 }  // namespace slamd

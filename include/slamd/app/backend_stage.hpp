@@ -21,6 +21,7 @@
 
 #include "slamd/app/packets.hpp"
 #include "slamd/backend/backend.hpp"
+#include "slamd/backend/keyframe_trajectory.hpp"
 #include "slamd/common/trajectory.hpp"
 #include "slamd/comms/pose_codec.hpp"
 
@@ -66,21 +67,15 @@ class BackendStage {
   const Backend& backend() const { return *backend_; }
 
  private:
-  struct FrameAnchor {
-    double timestamp_s = 0.0;
-    std::int64_t keyframe_id = -1;
-    SE3 T_keyframe_camera = SE3::Identity();
-  };
-
   BackendCorrection makeCorrection(const BackendUpdate& update, Utime utime);
 
   BackendConfig config_;
   std::shared_ptr<const Vocabulary> vocabulary_;
   std::unique_ptr<Backend> backend_;
-  std::vector<FrameAnchor> anchors_;
+  /// Every tracked frame with the filter's pose, anchored to its keyframe.
+  KeyframeAnchoredTrajectory frames_;
   std::vector<KeyframePoseEntry> keyframes_;  ///< id order; poses filled in on demand
   std::int64_t latest_keyframe_id_ = -1;
-  SE3 T_world_latest_keyframe_ = SE3::Identity();  ///< uncorrected
   std::int64_t sequence_ = 0;
   BackendStageStats stats_;
 };
