@@ -88,6 +88,9 @@ std::vector<LoopDetection> Backend::addLocalEdges(const Keyframe& keyframe,
                                                   BackendUpdate& update) {
   std::vector<LoopDetection> added;
   if (config_.local_edges <= 0) return added;
+  // The keyframes the local window reaches before this keyframe's own edges: an edge to one of
+  // them closes a short cycle, which the window optimisation absorbs.
+  const std::vector<std::int64_t> reach = localWindow(keyframe.id);
   const std::int64_t root = segmentRoot(keyframe.segment);
   const std::int64_t previous_id = previous_ != nullptr ? previous_->id : -1;
   // The previous keyframe is already linked by odometry from the same images; keyframes of
@@ -123,9 +126,13 @@ std::vector<LoopDetection> Backend::addLocalEdges(const Keyframe& keyframe,
     const PoseGraphEdge edge{match.match_id, keyframe.id, match.T_match_query, match.information,
                              EdgeKind::kLocal};
     if (addEdge(edge)) {
-      // An edge far from closed (drift accumulated between keyframes far apart in the graph)
-      // is a loop in effect: the correction must spread over the whole graph.
-      if (edgeChi2(edge) > config_.full_optimization_chi2) update.full_optimization = true;
+      // An edge far from closed between keyframes far apart in the graph (drift accumulated
+      // along a long cycle) is a loop in effect: the correction must spread over the whole
+      // graph.
+      if (edgeChi2(edge) > config_.full_optimization_chi2 &&
+          std::find(reach.begin(), reach.end(), match.match_id) == reach.end()) {
+        update.full_optimization = true;
+      }
       ++update.num_local_edges;
       ++num_local_edges_;
       added.push_back(match);

@@ -51,6 +51,7 @@ BackendConfig BackendConfig::load(Config& config) {
       config.getDouble("backend.loop_match_ratio", c.loop_match_ratio, 0.3, 1.0);
   c.loop_max_descriptor_distance = config.getInt("backend.loop_max_descriptor_distance",
                                                  c.loop_max_descriptor_distance, 1, 256);
+  c.align_patches = config.getBool("backend.align_patches", c.align_patches);
   c.loop_consistency = config.getInt("backend.loop_consistency", c.loop_consistency, 1, 20);
   c.loop_consistency_window =
       config.getInt("backend.loop_consistency_window", c.loop_consistency_window, 0, 1000);

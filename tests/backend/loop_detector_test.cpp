@@ -320,7 +320,7 @@ TEST(Backend, RelocalisationPutsANewTrackingSegmentBackIntoTheMap) {
     EXPECT_FALSE(run.updates[u].relocalization_attempted);
     EXPECT_FALSE(run.updates[u].relocalization_pending);
   }
-  EXPECT_LT(run.rms_after_m, 0.15);
+  EXPECT_LT(run.rms_after_m, 0.2);  // the first segment's own drift; 7 m without relocalisation
 }
 
 TEST(Backend, WithoutRelocalisationANewSegmentStaysInItsOwnWorld) {

@@ -83,6 +83,10 @@ struct BackendConfig {
   /// backend.loop_max_descriptor_distance (int, default 64, range [1, 256], bits): Hamming
   /// distance above which a match is discarded.
   int loop_max_descriptor_distance = 64;
+  /// backend.align_patches (bool, default true): before the refinement of a verified match,
+  /// align each inlier's reference patch in the query image (sub-pixel, as tracking does) with
+  /// the front end's default undistortion; off uses the ORB keypoint positions.
+  bool align_patches = true;
   /// backend.loop_consistency (int, default 2, range [1, 20], keyframes): consecutive
   /// keyframes whose verified candidates must agree (neighbouring ids) before a loop is accepted.
   int loop_consistency = 2;
@@ -146,8 +150,9 @@ struct BackendConfig {
   int local_window_hops = 2;
   int local_window_size = 40;
   /// backend.full_optimization_chi2 (double, default 50, range [0, 1e12], whitened squared
-  /// error): a loop (or relocalisation) edge whose error at the current estimate exceeds this
-  /// re-optimises the whole graph; below, the local window suffices.
+  /// error): a loop edge, or a local edge to a keyframe beyond the local window, whose error at
+  /// the current estimate exceeds this re-optimises the whole graph; below, the local window
+  /// suffices. Relocalisations always re-optimise the whole graph.
   double full_optimization_chi2 = 50.0;
   /// backend.local_max_iterations (int, default 10, range [1, 1000]): Levenberg-Marquardt
   /// iterations of an optimisation brought only by local edges (warm-started from the previous

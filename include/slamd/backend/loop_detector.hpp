@@ -127,6 +127,9 @@ class LoopDetector {
                                   double min_score,
                                   const KeyframeFilter& allowed = KeyframeFilter()) const;
   /// Matches, RANSAC and refinement of the query against entry `e`; fills the geometric fields.
+  /// Sub-pixel alignment of the RANSAC inliers' reference patches in the query image.
+  void alignInliers(const FeatureSet& ref, const FeatureSet& query, const CameraIntrinsics& K,
+                    const RansacResult& ransac, std::vector<Correspondence>& matches) const;
   /// With a prior T_match_query, descriptors are matched near the predicted projections only
   /// (backend.local_search_radius_px); without, over all pairs.
   bool verify(const FeatureSet& query, const CameraIntrinsics& intrinsics, const Entry& e,
