@@ -195,13 +195,16 @@ BackendUpdate Backend::add(const KeyframePtr& keyframe, const Matrix6d* covarian
       edge.information = Matrix6d::Identity() / (kSegmentLinkSigma * kSegmentLinkSigma);
       relocalization_attempts_ = 0;
     } else {
-      info.path_length_m = keyframes_.at(previous_->id).path_length_m + T_prev_curr.translation().norm();
+      info.path_length_m =
+          keyframes_.at(previous_->id).path_length_m + T_prev_curr.translation().norm();
       if (covariance_prev_curr != nullptr && covariance_prev_curr->allFinite()) {
         Matrix6d covariance = 0.5 * (*covariance_prev_curr + covariance_prev_curr->transpose());
         for (int k = 0; k < 3; ++k) covariance(k, k) += kTrackingFloorM * kTrackingFloorM;
         for (int k = 3; k < 6; ++k) covariance(k, k) += kTrackingFloorRad * kTrackingFloorRad;
         const Matrix6d information = covariance.inverse();
-        if (information.allFinite()) edge.information = 0.5 * (information + information.transpose());
+        if (information.allFinite()) {
+          edge.information = 0.5 * (information + information.transpose());
+        }
       }
     }
     addEdge(edge);
@@ -218,7 +221,6 @@ BackendUpdate Backend::add(const KeyframePtr& keyframe, const Matrix6d* covarian
     changed = changed || update.relocalized;
     full = update.relocalized;
   }
-  update.relocalization_pending = segmentRoot(keyframe->segment) != segmentRoot(first_segment_);
 
   const std::vector<LoopDetection> local = addLocalEdges(*keyframe, update);
   full = full || update.full_optimization;
@@ -258,7 +260,11 @@ BackendUpdate Backend::add(const KeyframePtr& keyframe, const Matrix6d* covarian
     update.optimized = true;
     update.corrected_poses.reserve(graph_.numNodes());
     for (std::int64_t id : graph_.nodeIds()) update.corrected_poses.emplace_back(id, graph_.pose(id));
+  } else {
+    update.full_optimization = false;
   }
+  // After the loop search too: a loop into the map also joins a new segment.
+  update.relocalization_pending = segmentRoot(keyframe->segment) != segmentRoot(first_segment_);
   update.T_world_odometry = graph_.pose(keyframe->id) * keyframe->T_world_camera.inverse();
   return update;
 }
