@@ -52,9 +52,7 @@ std::optional<BackendCorrection> BackendStage::process(const EstimatedPacket& pa
                                            T_world_camera});
     if (update.optimized) correction = makeCorrection(update, keyframe->utime);
   }
-  OdometryResult filtered = odometry;
-  filtered.T_world_camera = T_world_camera;
-  frames_.addFrame(filtered);
+  frames_.addFrame(odometry, T_world_camera);
   return correction;
 }
 

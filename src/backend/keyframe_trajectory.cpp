@@ -10,12 +10,13 @@ void KeyframeAnchoredTrajectory::addKeyframe(const KeyframePtr& keyframe) {
   latest_ = keyframe;
 }
 
-void KeyframeAnchoredTrajectory::addFrame(const OdometryResult& result) {
+void KeyframeAnchoredTrajectory::addFrame(const OdometryResult& result,
+                                          const SE3& T_world_camera) {
   if (latest_ == nullptr) return;
   std::int64_t anchor = latest_->id;
   const auto it = keyframes_.find(result.reference_keyframe_id);
   if (it != keyframes_.end() && it->second->segment == result.segment) anchor = it->first;
-  frames_.push_back({utimeToSeconds(result.utime), anchor, result.T_world_camera});
+  frames_.push_back({utimeToSeconds(result.utime), anchor, T_world_camera});
 }
 
 Trajectory KeyframeAnchoredTrajectory::odometry() const {

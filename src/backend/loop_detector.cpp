@@ -75,41 +75,12 @@ void LoopDetector::alignInliers(const FeatureSet& ref, const FeatureSet& query,
   // Two independent ORB detections locate the same point to about a pixel at their pyramid
   // level; aligning the reference patch in the query image (as tracking does) makes each inlier
   // sub-pixel consistent with the reference keypoint, which is what makes the edge precise.
-  if (ref.align_gray.empty() || query.align_gray.empty() || ref.keypoints.size() != ref.size() ||
-      query.keypoints.size() != query.size()) {
-    return;
-  }
-  const SE3 T_curr_ref = ransac.T_ref_curr.inverse();
-  std::vector<cv::Point2f> aligned;
-  std::vector<std::size_t> which;
-  for (std::size_t i = 0; i < matches.size(); ++i) {
-    if (!ransac.inliers[i]) continue;
-    const Correspondence& c = matches[i];
-    // Local affine map between the views at this point (a fronto-parallel patch at its depth).
-    const Eigen::Vector2d& ref_px = ref.pixels[static_cast<std::size_t>(c.ref_index)];
-    const double z = c.point_ref.z();
-    const Eigen::Vector2d p0 = K.project(T_curr_ref * c.point_ref);
-    const Eigen::Vector2d pu =
-        K.project(T_curr_ref * K.backProject(ref_px.x() + 1.0, ref_px.y(), z)) - p0;
-    const Eigen::Vector2d pv =
-        K.project(T_curr_ref * K.backProject(ref_px.x(), ref_px.y() + 1.0, z)) - p0;
-    Eigen::Matrix2d curr_from_ref;
-    curr_from_ref << pu, pv;
-    const Eigen::Matrix2d inv = curr_from_ref.inverse();
-    if (!inv.allFinite()) continue;
-    const cv::Matx22d ref_from_curr(inv(0, 0), inv(0, 1), inv(1, 0), inv(1, 1));
-    cv::Point2f out;
-    if (alignPatch(ref.align_gray, ref.keypoints[static_cast<std::size_t>(c.ref_index)].pt,
-                   query.align_gray, query.keypoints[static_cast<std::size_t>(c.curr_index)].pt,
-                   3.0, out, ref_from_curr)) {
-      aligned.push_back(out);
-      which.push_back(i);
-    }
-  }
-  const std::vector<Eigen::Vector2d> pixels = undistortPixels(aligned, K, TrackingConfig());
-  for (std::size_t k = 0; k < which.size(); ++k) {
-    matches[which[k]].pixel_curr = pixels[k];
-    matches[which[k]].pixel_sigma_px = 1.0;
+  const AlignedInliers aligned =
+      alignInlierPatches(ref, query, K, ransac.T_ref_curr, matches, ransac.inliers);
+  const std::vector<Eigen::Vector2d> pixels = undistortPixels(aligned.pixels_raw, K, TrackingConfig());
+  for (std::size_t k = 0; k < aligned.match_indices.size(); ++k) {
+    matches[aligned.match_indices[k]].pixel_curr = pixels[k];
+    matches[aligned.match_indices[k]].pixel_sigma_px = 1.0;
   }
 }
 

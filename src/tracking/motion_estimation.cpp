@@ -425,4 +425,42 @@ RefinementResult refinePose(const std::vector<Correspondence>& matches,
   return result;
 }
 
+AlignedInliers alignInlierPatches(const FeatureSet& ref, const FeatureSet& curr,
+                                  const CameraIntrinsics& K, const SE3& T_ref_curr,
+                                  const std::vector<Correspondence>& matches,
+                                  const std::vector<std::uint8_t>& inliers) {
+  AlignedInliers aligned;
+  if (ref.align_gray.empty() || curr.align_gray.empty() ||
+      ref.keypoints.size() != ref.size() || curr.keypoints.size() != curr.size()) {
+    return aligned;
+  }
+  const SE3 T_curr_ref = T_ref_curr.inverse();
+  for (std::size_t i = 0; i < matches.size(); ++i) {
+    if (!inliers[i]) continue;
+    const Correspondence& c = matches[i];
+    // Local affine map between the views at this point (fronto-parallel patch at its depth):
+    // how a pixel step in the current image moves in the reference image.
+    const Eigen::Vector2d& ref_px = ref.pixels[static_cast<std::size_t>(c.ref_index)];
+    const double z = c.point_ref.z();
+    const Eigen::Vector2d p0 = K.project(T_curr_ref * c.point_ref);
+    const Eigen::Vector2d pu =
+        K.project(T_curr_ref * K.backProject(ref_px.x() + 1.0, ref_px.y(), z)) - p0;
+    const Eigen::Vector2d pv =
+        K.project(T_curr_ref * K.backProject(ref_px.x(), ref_px.y() + 1.0, z)) - p0;
+    Eigen::Matrix2d curr_from_ref;
+    curr_from_ref << pu, pv;
+    const Eigen::Matrix2d inv = curr_from_ref.inverse();
+    if (!inv.allFinite()) continue;
+    const cv::Matx22d ref_from_curr(inv(0, 0), inv(0, 1), inv(1, 0), inv(1, 1));
+    cv::Point2f out;
+    if (alignPatch(ref.align_gray, ref.keypoints[static_cast<std::size_t>(c.ref_index)].pt,
+                   curr.align_gray, curr.keypoints[static_cast<std::size_t>(c.curr_index)].pt,
+                   3.0, out, ref_from_curr)) {
+      aligned.match_indices.push_back(i);
+      aligned.pixels_raw.push_back(out);
+    }
+  }
+  return aligned;
+}
+
 }  // namespace slamd

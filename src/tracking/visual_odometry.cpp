@@ -411,47 +411,17 @@ void VisualOdometry::alignInlierPatches(const FeatureSet& ref, const SE3& T_ref_
                                        const CurrentFrame& curr,
                                        std::vector<Correspondence>& matches,
                                        const std::vector<std::uint8_t>& inliers) const {
-  // Align each inlier's reference patch in the current image: the correspondences become
-  // sub-pixel consistent with the reference keypoints (not two independent detections).
-  const CameraIntrinsics& K = curr.K;
-  const FeatureSet& cf = *curr.features;
-  std::vector<cv::Point2f> aligned;
-  std::vector<std::size_t> which;
-  const SE3 T_curr_ref = T_ref_curr.inverse();
-  for (std::size_t i = 0; i < matches.size(); ++i) {
-    if (!inliers[i]) continue;
-    const Correspondence& c = matches[i];
-    // Local affine map between the views at this point (fronto-parallel patch at its depth):
-    // how a pixel step in the current image moves in the reference image.
-    const Eigen::Vector2d& ref_px = ref.pixels[static_cast<std::size_t>(c.ref_index)];
-    const double z = c.point_ref.z();
-    const Eigen::Vector2d p0 = K.project(T_curr_ref * c.point_ref);
-    const Eigen::Vector2d pu =
-        K.project(T_curr_ref * K.backProject(ref_px.x() + 1.0, ref_px.y(), z)) - p0;
-    const Eigen::Vector2d pv =
-        K.project(T_curr_ref * K.backProject(ref_px.x(), ref_px.y() + 1.0, z)) - p0;
-    Eigen::Matrix2d curr_from_ref;
-    curr_from_ref << pu, pv;
-    const Eigen::Matrix2d inv = curr_from_ref.inverse();
-    const cv::Matx22d ref_from_curr(inv(0, 0), inv(0, 1), inv(1, 0), inv(1, 1));
-    cv::Point2f out;
-    if (inv.allFinite() &&
-        alignPatch(ref.align_gray, ref.keypoints[static_cast<std::size_t>(c.ref_index)].pt,
-                   cf.align_gray,
-                   cf.keypoints[static_cast<std::size_t>(c.curr_index)].pt, 3.0, out,
-                   ref_from_curr)) {
-      aligned.push_back(out);
-      which.push_back(i);
-    }
-  }
-  const std::vector<Eigen::Vector2d> pixels = undistortPixels(aligned, K, config_);
-  for (std::size_t k = 0; k < which.size(); ++k) {
-    Correspondence& c = matches[which[k]];
+  const AlignedInliers aligned =
+      slamd::alignInlierPatches(ref, *curr.features, curr.K, T_ref_curr, matches, inliers);
+  const std::vector<Eigen::Vector2d> pixels = undistortPixels(aligned.pixels_raw, curr.K, config_);
+  for (std::size_t k = 0; k < aligned.match_indices.size(); ++k) {
+    Correspondence& c = matches[aligned.match_indices[k]];
+    const cv::Point2f& raw = aligned.pixels_raw[k];
     c.pixel_curr = pixels[k];
     c.pixel_sigma_px = config_.pixel_sigma_px;
     // The depth where the patch now lies, not where the keypoint was detected.
-    c.depth_curr_m = depthAtPixel(curr.depth_m, static_cast<double>(aligned[k].x),
-                                  static_cast<double>(aligned[k].y), config_);
+    c.depth_curr_m = depthAtPixel(curr.depth_m, static_cast<double>(raw.x),
+                                  static_cast<double>(raw.y), config_);
   }
 }
 

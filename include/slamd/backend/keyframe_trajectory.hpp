@@ -27,7 +27,10 @@ class KeyframeAnchoredTrajectory {
  public:
   void addKeyframe(const KeyframePtr& keyframe);
   /// Records the frame of one processFrame() result (after addKeyframe for its keyframe).
-  void addFrame(const OdometryResult& result);
+  void addFrame(const OdometryResult& result) { addFrame(result, result.T_world_camera); }
+  /// The same with the frame's pose from another estimator (the filter's), in the frame its
+  /// keyframes' poses were given in.
+  void addFrame(const OdometryResult& result, const SE3& T_world_camera);
 
   std::size_t size() const { return frames_.size(); }
   /// The frames as odometry reported them.

@@ -22,6 +22,7 @@
 
 #include "slamd/common/camera_intrinsics.hpp"
 #include "slamd/common/se3.hpp"
+#include "slamd/tracking/features.hpp"
 
 namespace slamd {
 
@@ -102,5 +103,21 @@ RefinementResult refinePose(const std::vector<Correspondence>& matches,
 /// Reprojection error (pixels) of correspondence c under T_ref_curr; infinity behind the camera.
 double reprojectionErrorPx(const Correspondence& c, const CameraIntrinsics& K,
                            const SE3& T_ref_curr);
+
+/// Inliers whose reference patch was found again in the current image (alignInlierPatches).
+struct AlignedInliers {
+  std::vector<std::size_t> match_indices;  ///< into the matches
+  std::vector<cv::Point2f> pixels_raw;     ///< aligned position in the current image (distorted)
+};
+
+/// Aligns each inlier's reference patch in the current image (alignPatch, warped by the local
+/// affine map of a fronto-parallel patch at the point's depth under T_ref_curr), so that the
+/// correspondences become sub-pixel consistent with the reference keypoints rather than two
+/// independent detections. Needs both feature sets' align_gray and keypoints; otherwise nothing
+/// is aligned.
+AlignedInliers alignInlierPatches(const FeatureSet& ref, const FeatureSet& curr,
+                                  const CameraIntrinsics& K, const SE3& T_ref_curr,
+                                  const std::vector<Correspondence>& matches,
+                                  const std::vector<std::uint8_t>& inliers);
 
 }  // namespace slamd
