@@ -417,15 +417,38 @@ void attachGeometry(const cv::Mat& depth_m, const CameraIntrinsics& K,
   features.pixels = undistortPixels(raw, K, config);
   const double nan = std::numeric_limits<double>::quiet_NaN();
   const bool have_depth = !depth_m.empty() && depth_m.type() == CV_32FC1;
+  features.inverse_depth_gradient.assign(n, Eigen::Vector2d::Zero());
   for (std::size_t i = 0; i < n; ++i) {
     features.points[i] = Eigen::Vector3d(nan, nan, nan);
     if (!have_depth) continue;
-    const double z = depthAtPixel(depth_m, static_cast<double>(features.keypoints[i].pt.x),
-                                  static_cast<double>(features.keypoints[i].pt.y), config);
+    const double x = static_cast<double>(features.keypoints[i].pt.x);
+    const double y = static_cast<double>(features.keypoints[i].pt.y);
+    const double z = depthAtPixel(depth_m, x, y, config);
     if (std::isnan(z)) continue;
     features.points[i] = K.backProject(features.pixels[i].x(), features.pixels[i].y(), z);
     ++features.num_with_depth;
+    features.inverse_depth_gradient[i] = inverseDepthGradient(depth_m, x, y, z);
   }
+}
+
+Eigen::Vector2d inverseDepthGradient(const cv::Mat& depth_m, double x, double y, double z_m) {
+  // Central differences over +-kStep pixels; both sides must lie on the same surface (within
+  // 15% of the centre's depth), otherwise the slope is unknown (zero).
+  constexpr int kStep = 2;
+  const int u = static_cast<int>(std::lround(x));
+  const int v = static_cast<int>(std::lround(y));
+  if (depth_m.empty() || depth_m.type() != CV_32FC1 || u < kStep || v < kStep ||
+      u + kStep >= depth_m.cols || v + kStep >= depth_m.rows || !(z_m > 0.0)) {
+    return Eigen::Vector2d::Zero();
+  }
+  auto inverse_at = [&](int uu, int vv) {
+    const double zn = depth_m.at<float>(vv, uu);
+    return (std::isfinite(zn) && std::abs(zn - z_m) <= 0.15 * z_m) ? 1.0 / zn : -1.0;
+  };
+  const double left = inverse_at(u - kStep, v), right = inverse_at(u + kStep, v);
+  const double up = inverse_at(u, v - kStep), down = inverse_at(u, v + kStep);
+  if (left < 0.0 || right < 0.0 || up < 0.0 || down < 0.0) return Eigen::Vector2d::Zero();
+  return Eigen::Vector2d((right - left) / (2 * kStep), (down - up) / (2 * kStep));
 }
 
 double depthAtPixel(const cv::Mat& depth_m, double x, double y, const TrackingConfig& config) {
@@ -444,16 +467,21 @@ double depthAtPixel(const cv::Mat& depth_m, double x, double y, const TrackingCo
       if (std::isfinite(zn) && std::abs(zn - z) > tolerance) return nan;
     }
   }
-  // Sub-pixel position: interpolate the depth bilinearly when the four neighbours are valid
-  // (they agree with the centre, checked above), so slanted surfaces get the right depth.
+  // Sub-pixel position: when the four neighbours are valid (they agree with the centre, checked
+  // above), interpolate the inverse depth bilinearly. On a plane the inverse depth is affine in the
+  // pixel coordinates, so this is exact there; interpolating the depth itself overestimates it on
+  // slanted surfaces (1/z is convex in the pixel coordinates).
   const int x0 = static_cast<int>(std::floor(x));
   const int y0 = static_cast<int>(std::floor(y));
   if (x0 >= 0 && y0 >= 0 && x0 + 1 < depth_m.cols && y0 + 1 < depth_m.rows) {
     const double z00 = depth_m.at<float>(y0, x0), z01 = depth_m.at<float>(y0, x0 + 1);
     const double z10 = depth_m.at<float>(y0 + 1, x0), z11 = depth_m.at<float>(y0 + 1, x0 + 1);
-    if (std::isfinite(z00) && std::isfinite(z01) && std::isfinite(z10) && std::isfinite(z11)) {
+    if (z00 > 0.0 && z01 > 0.0 && z10 > 0.0 && z11 > 0.0 && std::isfinite(z00) &&
+        std::isfinite(z01) && std::isfinite(z10) && std::isfinite(z11)) {
       const double ax = x - x0, ay = y - y0;
-      z = (1 - ay) * ((1 - ax) * z00 + ax * z01) + ay * ((1 - ax) * z10 + ax * z11);
+      const double inverse_depth = (1 - ay) * ((1 - ax) / z00 + ax / z01) +
+                                   ay * ((1 - ax) / z10 + ax / z11);
+      z = 1.0 / inverse_depth;
     }
   }
   return z;

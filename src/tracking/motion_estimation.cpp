@@ -438,15 +438,23 @@ AlignedInliers alignInlierPatches(const FeatureSet& ref, const FeatureSet& curr,
   for (std::size_t i = 0; i < matches.size(); ++i) {
     if (!inliers[i]) continue;
     const Correspondence& c = matches[i];
-    // Local affine map between the views at this point (fronto-parallel patch at its depth):
-    // how a pixel step in the current image moves in the reference image.
-    const Eigen::Vector2d& ref_px = ref.pixels[static_cast<std::size_t>(c.ref_index)];
-    const double z = c.point_ref.z();
+    // Local affine map between the views at this point: how a pixel step in the current image
+    // moves in the reference image. The patch lies on the surface the depth shows around the
+    // feature (its inverse-depth slope), fronto-parallel where that is unknown; on the slanted
+    // walls of a corridor a fronto-parallel patch warps wrongly and biases the aligned position.
+    const std::size_t r = static_cast<std::size_t>(c.ref_index);
+    const Eigen::Vector2d& ref_px = ref.pixels[r];
+    const double inverse_z = 1.0 / c.point_ref.z();
+    const Eigen::Vector2d slope = r < ref.inverse_depth_gradient.size()
+                                      ? ref.inverse_depth_gradient[r]
+                                      : Eigen::Vector2d::Zero();
+    const double z_u = 1.0 / (inverse_z + slope.x()), z_v = 1.0 / (inverse_z + slope.y());
+    if (!(z_u > 0.0) || !(z_v > 0.0)) continue;
     const Eigen::Vector2d p0 = K.project(T_curr_ref * c.point_ref);
     const Eigen::Vector2d pu =
-        K.project(T_curr_ref * K.backProject(ref_px.x() + 1.0, ref_px.y(), z)) - p0;
+        K.project(T_curr_ref * K.backProject(ref_px.x() + 1.0, ref_px.y(), z_u)) - p0;
     const Eigen::Vector2d pv =
-        K.project(T_curr_ref * K.backProject(ref_px.x(), ref_px.y() + 1.0, z)) - p0;
+        K.project(T_curr_ref * K.backProject(ref_px.x(), ref_px.y() + 1.0, z_v)) - p0;
     Eigen::Matrix2d curr_from_ref;
     curr_from_ref << pu, pv;
     const Eigen::Matrix2d inv = curr_from_ref.inverse();

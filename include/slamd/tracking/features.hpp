@@ -26,6 +26,9 @@ struct FeatureSet {
   std::vector<Eigen::Vector2d> pixels;  ///< undistorted pixels (ideal pinhole), pixels
   std::vector<Eigen::Vector3d> points;  ///< camera optical frame, metres; NaN without depth
   std::vector<float> scale;             ///< keypoint scale relative to level 0 (>= 1)
+  /// d(1/z)/du and d(1/z)/dv at each raw keypoint (1/m per pixel): the slope of the surface
+  /// around the feature; zero where the depth around it is missing or broken. May be empty.
+  std::vector<Eigen::Vector2d> inverse_depth_gradient;
   cv::Mat gray;                         ///< the image the features come from (CV_8UC1, shared)
   /// gray smoothed for patch alignment (tracking.align_blur_sigma_px; gray itself when 0)
   cv::Mat align_gray;
@@ -60,6 +63,11 @@ void attachGeometry(const cv::Mat& depth_m, const CameraIntrinsics& intrinsics,
 /// of the nearest pixel disagrees with it); otherwise interpolated bilinearly (pixel centres at
 /// integer coordinates).
 double depthAtPixel(const cv::Mat& depth_m, double x, double y, const TrackingConfig& config);
+
+/// Slope of the inverse depth (1/m per pixel) around raw pixel (x, y) whose depth is z_m, by
+/// central differences over +-2 pixels: on a plane 1/z is affine in the pixel coordinates, so this
+/// gives the local plane. Zero when a neighbour is missing or on another surface.
+Eigen::Vector2d inverseDepthGradient(const cv::Mat& depth_m, double x, double y, double z_m);
 
 /// Undistorted (ideal pinhole) pixels of raw image pixels, when configured and the intrinsics
 /// carry plumb-bob coefficients; otherwise the raw pixels.
