@@ -157,6 +157,8 @@ int main(int argc, char** argv) {
   SE3 chained = SE3::Identity();
   std::vector<double> cpu_ms, nis_compared, nis_accepted;
   int frames = 0, detected = 0, accepted = 0, gated = 0;
+  int axes_seen = 0, axes_accepted = 0, axes_gated = 0;
+  std::vector<double> axis_nis_compared;
   Utime last_utime = 0;
   while (true) {
     FrameRead read = source->next(std::chrono::milliseconds(1000));
@@ -179,6 +181,7 @@ int main(int argc, char** argv) {
     in.covariance = last_utime > 0 ? r.covariance : Matrix6d::Identity() * 1e-12;
     in.dt_s = last_utime > 0 ? utimeToSeconds(r.utime - last_utime) : 0.0;
     in.gray = frame.gray;
+    in.depth_m = frame.depth_m;
     const double start = threadCpuMs();
     const FilterOutput out = filter->process(in);
     cpu_ms.push_back(threadCpuMs() - start);
@@ -197,6 +200,12 @@ int main(int argc, char** argv) {
       }
       if (out.update->accepted) nis_accepted.push_back(out.update->nis);
     }
+    for (const VpUpdateResult& u : out.axis_updates) {
+      ++axes_seen;
+      axes_accepted += u.accepted;
+      axes_gated += u.status == VpUpdateStatus::kGated;
+      if (u.accepted || u.status == VpUpdateStatus::kGated) axis_nis_compared.push_back(u.nis);
+    }
     if (vp_log) {
       std::fprintf(vp_log, "%d %.6f %s", frames, utimeToSeconds(r.utime),
                    out.vanishing_point ? vanishingPointStatusName(out.vanishing_point->status)
@@ -212,6 +221,15 @@ int main(int argc, char** argv) {
         std::fprintf(vp_log, " %s lm %d pred %.1f %.1f nis %.2f", vpUpdateStatusName(out.update->status),
                      out.update->landmark_id, out.update->predicted_px.x(),
                      out.update->predicted_px.y(), out.update->nis);
+      }
+      for (std::size_t k = 0; k < out.axis_updates.size(); ++k) {
+        const SurfaceAxis& axis = out.surface_axes->axes[k];
+        const VpUpdateResult& u = out.axis_updates[k];
+        std::fprintf(vp_log, " | axis %.3f %.3f %.3f sd %.3f deg cells %d %s lm %d nis %.2f",
+                     axis.direction_camera.x(), axis.direction_camera.y(),
+                     axis.direction_camera.z(),
+                     std::sqrt(axis.covariance.trace() / 2.0) * 180.0 / M_PI, axis.num_cells,
+                     vpUpdateStatusName(u.status), u.landmark_id, u.nis);
       }
       std::fprintf(vp_log, "\n");
     }
@@ -237,6 +255,11 @@ int main(int argc, char** argv) {
               frames, detected, accepted, gated, filter ? filter->ekf().landmarks().size() : 0u,
               nis_mean, nis_compared.size(), nis_acc_mean, percentile(cpu_ms, 50),
               percentile(cpu_ms, 95));
+  double axis_nis_mean = 0.0;
+  for (double v : axis_nis_compared) axis_nis_mean += v;
+  if (!axis_nis_compared.empty()) axis_nis_mean /= static_cast<double>(axis_nis_compared.size());
+  std::printf("plane axes: %d seen, %d accepted, %d gated; mean NIS %.2f over %zu compared\n",
+              axes_seen, axes_accepted, axes_gated, axis_nis_mean, axis_nis_compared.size());
   if (const auto gt = source->groundTruth(); gt && !gt->empty() && frames > 2) {
     const double ate_odo = eval::computeAte(*gt, odometry_only).translation_m.rmse;
     const double ate_filter = eval::computeAte(*gt, filtered).translation_m.rmse;

@@ -27,6 +27,7 @@ EstimatedPacket PoseEstimator::process(TrackedPacket packet) {
   input.T_prev_curr = last_utime_ > 0 ? odometry.T_prev_curr : SE3::Identity();
   input.covariance = last_utime_ > 0 ? odometry.covariance : Matrix6d::Identity() * 1e-12;
   input.dt_s = last_utime_ > 0 ? utimeToSeconds(odometry.utime - last_utime_) : 0.0;
+  input.depth_m = frame.depth_m;  // plane axes (filter.surface_axes) are detected here
   if (vanishing_point_source_ == VanishingPointSource::kDetectHere) {
     input.gray = frame.gray;
   } else {

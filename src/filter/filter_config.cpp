@@ -49,6 +49,7 @@ FilterConfig FilterConfig::load(Config& config) {
   FilterConfig c;
   c.enabled = config.getBool("filter.enabled", c.enabled);
   c.vanishing_points = config.getBool("filter.vanishing_points", c.vanishing_points);
+  c.surface_axes = config.getBool("filter.surface_axes", c.surface_axes);
   c.translation_noise_m_per_sqrt_s = config.getDouble(
       "filter.translation_noise_m_per_sqrt_s", c.translation_noise_m_per_sqrt_s, 0.0, 10.0);
   c.rotation_noise_rad_per_sqrt_s = config.getDouble(
@@ -77,6 +78,7 @@ FilterConfig FilterConfig::load(Config& config) {
       config.getInt("filter.landmark_retry_calls", c.landmark_retry_calls, 0, 1000000);
   c.min_update_lines = config.getInt("filter.min_update_lines", c.min_update_lines, 2, 1000);
   c.max_landmarks = config.getInt("filter.max_landmarks", c.max_landmarks, 0, 32);
+  c.axes = SurfaceAxesConfig::load(config);
   c.initial_translation_sigma_m = config.getDouble("filter.initial_translation_sigma_m",
                                                    c.initial_translation_sigma_m, 0.0, 100.0);
   c.initial_rotation_sigma_rad = config.getDouble("filter.initial_rotation_sigma_rad",

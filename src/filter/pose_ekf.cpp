@@ -164,6 +164,33 @@ Eigen::Vector3d PoseEkf::directionFromPixel(const CameraIntrinsics& K,
   return d_w;
 }
 
+bool PoseEkf::predictAxis(const Eigen::Matrix3d& R_world_camera, const Eigen::Vector3d& d_world,
+                          const Eigen::Vector3d& measured_camera, Eigen::Vector2d* predicted,
+                          Eigen::Matrix<double, 2, 3>* H_rotation, Eigen::Matrix2d* H_direction) {
+  const Eigen::Vector3d d_c = R_world_camera.transpose() * d_world;
+  const double cosine = measured_camera.dot(d_c);
+  if (!(std::abs(cosine) >= kMinDirectionDepth)) return false;
+  const double s = cosine < 0.0 ? -1.0 : 1.0;
+  const Eigen::Matrix<double, 3, 2> B_m = tangentBasis(measured_camera);
+  if (predicted) *predicted = s * B_m.transpose() * d_c;
+  if (H_rotation) *H_rotation = s * B_m.transpose() * skew(d_c);
+  if (H_direction) {
+    *H_direction = s * B_m.transpose() * R_world_camera.transpose() * tangentBasis(d_world);
+  }
+  return true;
+}
+
+Eigen::Vector3d PoseEkf::directionFromAxis(const Eigen::Matrix3d& R_world_camera,
+                                           const Eigen::Vector3d& axis_camera,
+                                           Eigen::Matrix<double, 2, 3>* J_rotation,
+                                           Eigen::Matrix2d* J_axis) {
+  const Eigen::Vector3d d_w = R_world_camera * axis_camera;
+  const Eigen::Matrix<double, 3, 2> B = tangentBasis(d_w);
+  if (J_rotation) *J_rotation = -B.transpose() * R_world_camera * skew(axis_camera);
+  if (J_axis) *J_axis = B.transpose() * R_world_camera * tangentBasis(axis_camera);
+  return d_w;
+}
+
 // --- prediction --------------------------------------------------------------------------------
 
 EkfPredictStatus PoseEkf::predict(const SE3& T_prev_curr, const Matrix6d& covariance_prev_curr,
@@ -234,27 +261,29 @@ bool PoseEkf::validMeasurement(const Eigen::Vector2d& pixel, const Eigen::Matrix
   return true;
 }
 
-bool PoseEkf::innovation(std::size_t index, const Eigen::Vector2d& pixel,
-                         const Eigen::Matrix2d& R_px, VpUpdateResult* result,
-                         Eigen::MatrixXd* H) const {
+bool PoseEkf::innovation(std::size_t index, const Observation& observation,
+                         VpUpdateResult* result, Eigen::MatrixXd* H) const {
   const DirectionLandmark& landmark = landmarks_[index];
   Eigen::Vector2d predicted;
   Eigen::Matrix<double, 2, 3> H_rotation;
   Eigen::Matrix2d H_direction;
-  if (!projectDirection(intrinsics_, T_world_camera_.linear(), landmark.d_world, &predicted,
-                        &H_rotation, &H_direction)) {
-    return false;
-  }
+  const bool visible =
+      observation.kind == DirectionMeasurement::kVanishingPoint
+          ? projectDirection(intrinsics_, T_world_camera_.linear(), landmark.d_world, &predicted,
+                             &H_rotation, &H_direction)
+          : predictAxis(T_world_camera_.linear(), landmark.d_world, observation.axis_camera,
+                        &predicted, &H_rotation, &H_direction);
+  if (!visible) return false;
   const Eigen::Index n = P_.rows();
   H->setZero(2, n);
   H->block<2, 3>(0, 3) = H_rotation;
   H->block<2, 2>(0, 6 + 2 * static_cast<Eigen::Index>(index)) = H_direction;
-  const Eigen::Matrix2d S = (*H) * P_ * H->transpose() + R_px;
+  const Eigen::Matrix2d S = (*H) * P_ * H->transpose() + observation.R;
   const Eigen::LDLT<Eigen::Matrix2d> ldlt(S);
   if (ldlt.info() != Eigen::Success || !(S.determinant() > 0.0)) return false;
   result->landmark_id = landmark.id;
   result->predicted_px = predicted;
-  result->innovation_px = pixel - predicted;
+  result->innovation_px = result->measured_px - predicted;
   result->innovation_covariance = S;
   result->nis = result->innovation_px.dot(ldlt.solve(result->innovation_px));
   return std::isfinite(result->nis);
@@ -292,20 +321,26 @@ void PoseEkf::applyUpdate(const Eigen::MatrixXd& H, const Eigen::Vector2d& innov
 }
 
 void PoseEkf::acceptUpdate(std::size_t index, const Eigen::MatrixXd& H,
-                           const Eigen::Matrix2d& R_px, VpUpdateResult* result) {
-  applyUpdate(H, result->innovation_px, result->innovation_covariance, R_px);
+                           const Observation& observation, VpUpdateResult* result) {
+  applyUpdate(H, result->innovation_px, result->innovation_covariance, observation.R);
   ++landmarks_[index].num_updates;
   ++counters_.updates_accepted;
+  if (observation.kind == DirectionMeasurement::kSurfaceAxis) ++counters_.axis_updates_accepted;
   result->status = VpUpdateStatus::kAccepted;
   result->accepted = true;
+}
+
+std::int64_t PoseEkf::clock(DirectionMeasurement kind) const {
+  return kind == DirectionMeasurement::kVanishingPoint ? vp_calls_ : counters_.predictions;
 }
 
 VpUpdateResult PoseEkf::updateLandmark(int landmark_id, const Eigen::Vector2d& pixel,
                                        const Eigen::Matrix2d& pixel_covariance) {
   VpUpdateResult result;
   result.measured_px = pixel;
-  Eigen::Matrix2d R_px;
-  if (!validMeasurement(pixel, pixel_covariance, &R_px)) {
+  Observation observation;
+  observation.pixel = pixel;
+  if (!validMeasurement(pixel, pixel_covariance, &observation.R)) {
     ++counters_.bad_measurements;
     result.status = VpUpdateStatus::kBadMeasurement;
     return result;
@@ -318,7 +353,7 @@ VpUpdateResult PoseEkf::updateLandmark(int landmark_id, const Eigen::Vector2d& p
   }
   const auto index = static_cast<std::size_t>(it - landmarks_.begin());
   Eigen::MatrixXd H;
-  if (!innovation(index, pixel, R_px, &result, &H)) {
+  if (!innovation(index, observation, &result, &H)) {
     result.status = VpUpdateStatus::kNotVisible;
     result.landmark_id = landmark_id;
     return result;
@@ -336,7 +371,7 @@ VpUpdateResult PoseEkf::updateLandmark(int landmark_id, const Eigen::Vector2d& p
     return result;
   }
   const double nis = result.nis;
-  acceptUpdate(index, H, R_px, &result);
+  acceptUpdate(index, H, observation, &result);
   recordOutcome(index, nis);
   return result;
 }
@@ -344,15 +379,54 @@ VpUpdateResult PoseEkf::updateLandmark(int landmark_id, const Eigen::Vector2d& p
 VpUpdateResult PoseEkf::updateVanishingPoint(const Eigen::Vector2d& pixel,
                                              const Eigen::Matrix2d& pixel_covariance) {
   ++vp_calls_;
-  VpUpdateResult result;
-  result.measured_px = pixel;
-  result.status = VpUpdateStatus::kCandidate;
-  Eigen::Matrix2d R_px;
-  if (!validMeasurement(pixel, pixel_covariance, &R_px)) {
+  Observation observation;
+  observation.kind = DirectionMeasurement::kVanishingPoint;
+  observation.pixel = pixel;
+  if (!validMeasurement(pixel, pixel_covariance, &observation.R)) {
     ++counters_.bad_measurements;
+    VpUpdateResult result;
+    result.measured_px = pixel;
     result.status = VpUpdateStatus::kBadMeasurement;
     return result;
   }
+  return updateObservation(observation);
+}
+
+VpUpdateResult PoseEkf::updateDirection(const Eigen::Vector3d& direction_camera,
+                                        const Eigen::Matrix2d& covariance) {
+  Observation observation;
+  observation.kind = DirectionMeasurement::kSurfaceAxis;
+  if (!direction_camera.allFinite() || std::abs(direction_camera.norm() - 1.0) > 1e-6 ||
+      !isValidCovariance<2>(covariance, true)) {
+    ++counters_.bad_measurements;
+    VpUpdateResult result;
+    result.measurement = DirectionMeasurement::kSurfaceAxis;
+    result.status = VpUpdateStatus::kBadMeasurement;
+    return result;
+  }
+  observation.axis_camera = direction_camera.normalized();
+  observation.R = 0.5 * (covariance + covariance.transpose());
+  return updateObservation(observation);
+}
+
+Eigen::Vector3d PoseEkf::worldDirection(const Observation& observation,
+                                        Eigen::Matrix<double, 2, 3>* J_rotation,
+                                        Eigen::Matrix2d* J_measurement) const {
+  return observation.kind == DirectionMeasurement::kVanishingPoint
+             ? directionFromPixel(intrinsics_, T_world_camera_.linear(), observation.pixel,
+                                  J_rotation, J_measurement)
+             : directionFromAxis(T_world_camera_.linear(), observation.axis_camera, J_rotation,
+                                 J_measurement);
+}
+
+VpUpdateResult PoseEkf::updateObservation(const Observation& observation) {
+  VpUpdateResult result;
+  result.measurement = observation.kind;
+  result.measured_px =
+      observation.kind == DirectionMeasurement::kVanishingPoint ? observation.pixel
+                                                                : Eigen::Vector2d::Zero();
+  result.status = VpUpdateStatus::kCandidate;
+  const bool axis = observation.kind == DirectionMeasurement::kSurfaceAxis;
 
   // Association: the visible landmark with the smallest NIS.
   bool have_best = false;
@@ -362,7 +436,7 @@ VpUpdateResult PoseEkf::updateVanishingPoint(const Eigen::Vector2d& pixel,
   for (std::size_t i = 0; i < landmarks_.size(); ++i) {
     VpUpdateResult trial = result;
     Eigen::MatrixXd H;
-    if (!innovation(i, pixel, R_px, &trial, &H)) continue;
+    if (!innovation(i, observation, &trial, &H)) continue;
     if (!have_best || trial.nis < best.nis) {
       have_best = true;
       best_index = i;
@@ -370,14 +444,13 @@ VpUpdateResult PoseEkf::updateVanishingPoint(const Eigen::Vector2d& pixel,
       best_H = std::move(H);
     }
   }
-  const Eigen::Vector3d d_world =
-      directionFromPixel(intrinsics_, T_world_camera_.linear(), pixel, nullptr, nullptr);
+  const Eigen::Vector3d d_world = worldDirection(observation, nullptr, nullptr);
   const double separation_cos = std::cos(config_.landmark_min_separation_deg * kDegToRad);
   if (have_best) {
     result = best;
     if (best.nis <= config_.gate_chi2) {
       if (landmarks_[best_index].active) {
-        acceptUpdate(best_index, best_H, R_px, &result);
+        acceptUpdate(best_index, best_H, observation, &result);
       } else {
         ++counters_.probation_tests;
         result.status = VpUpdateStatus::kProbation;
@@ -386,6 +459,7 @@ VpUpdateResult PoseEkf::updateVanishingPoint(const Eigen::Vector2d& pixel,
       return result;
     }
     ++counters_.updates_gated;
+    if (axis) ++counters_.axis_updates_gated;
     result.status = VpUpdateStatus::kGated;
     // Only a detection of this landmark's direction tells about its consistency; one far from it
     // is another direction.
@@ -402,13 +476,18 @@ VpUpdateResult PoseEkf::updateVanishingPoint(const Eigen::Vector2d& pixel,
     if (std::abs(landmark.d_world.dot(d_world)) > separation_cos) return result;
   }
   if (nearRetired(d_world)) return result;
+  // Candidates must be seen on consecutive ticks of their own clock.
   candidates_.erase(std::remove_if(candidates_.begin(), candidates_.end(),
-                                   [&](const Candidate& c) { return c.last_call < vp_calls_ - 1; }),
+                                   [&](const Candidate& c) {
+                                     return c.last_tick < clock(c.kind) - 1;
+                                   }),
                     candidates_.end());
   const double same_cos = std::cos(config_.landmark_init_angle_deg * kDegToRad);
+  const std::int64_t now = clock(observation.kind);
   Candidate* match = nullptr;
   for (auto& c : candidates_) {
-    if (std::abs(c.d_world.dot(d_world)) >= same_cos) {
+    if (c.kind == observation.kind && c.last_tick < now &&
+        std::abs(c.d_world.dot(d_world)) >= same_cos) {
       match = &c;
       break;
     }
@@ -416,14 +495,14 @@ VpUpdateResult PoseEkf::updateVanishingPoint(const Eigen::Vector2d& pixel,
   if (match) {
     ++match->count;
     match->d_world = d_world;
-    match->last_call = vp_calls_;
+    match->last_tick = now;
   } else {
-    candidates_.push_back({d_world, 1, vp_calls_});
+    candidates_.push_back({observation.kind, d_world, 1, now});
     match = &candidates_.back();
   }
   if (match->count >= config_.landmark_init_frames) {
     candidates_.erase(candidates_.begin() + (match - candidates_.data()));
-    const int id = addLandmarkUnchecked(pixel, R_px, config_.landmark_probation == 0);
+    const int id = addLandmarkUnchecked(observation, config_.landmark_probation == 0);
     result.status = VpUpdateStatus::kNewLandmark;
     result.landmark_id = id;
   }
@@ -431,21 +510,20 @@ VpUpdateResult PoseEkf::updateVanishingPoint(const Eigen::Vector2d& pixel,
 }
 
 int PoseEkf::addLandmark(const Eigen::Vector2d& pixel, const Eigen::Matrix2d& pixel_covariance) {
-  Eigen::Matrix2d R_px;
-  if (!validMeasurement(pixel, pixel_covariance, &R_px)) {
+  Observation observation;
+  observation.pixel = pixel;
+  if (!validMeasurement(pixel, pixel_covariance, &observation.R)) {
     ++counters_.bad_measurements;
     return -1;
   }
   if (static_cast<int>(landmarks_.size()) >= config_.max_landmarks) return -1;
-  return addLandmarkUnchecked(pixel, R_px, true);
+  return addLandmarkUnchecked(observation, true);
 }
 
-int PoseEkf::addLandmarkUnchecked(const Eigen::Vector2d& pixel, const Eigen::Matrix2d& R_px,
-                                  bool active) {
+int PoseEkf::addLandmarkUnchecked(const Observation& observation, bool active) {
   Eigen::Matrix<double, 2, 3> J_rotation;
-  Eigen::Matrix2d J_pixel;
-  const Eigen::Vector3d d_world =
-      directionFromPixel(intrinsics_, T_world_camera_.linear(), pixel, &J_rotation, &J_pixel);
+  Eigen::Matrix2d J_measurement;
+  const Eigen::Vector3d d_world = worldDirection(observation, &J_rotation, &J_measurement);
   const Eigen::Index n = P_.rows();
   Eigen::MatrixXd J = Eigen::MatrixXd::Zero(2, n);
   J.block<2, 3>(0, 3) = J_rotation;
@@ -455,13 +533,14 @@ int PoseEkf::addLandmarkUnchecked(const Eigen::Vector2d& pixel, const Eigen::Mat
   P_new.bottomLeftCorner(2, n) = P_ln;
   P_new.topRightCorner(n, 2) = P_ln.transpose();
   P_new.bottomRightCorner<2, 2>() =
-      P_ln * J.transpose() + J_pixel * R_px * J_pixel.transpose();
+      P_ln * J.transpose() + J_measurement * observation.R * J_measurement.transpose();
   P_ = std::move(P_new);
   symmetrize(P_);
   DirectionLandmark landmark;
   landmark.id = next_landmark_id_++;
   landmark.d_world = d_world;
   landmark.active = active;
+  landmark.kind = observation.kind;
   landmarks_.push_back(landmark);
   ++counters_.landmarks_created;
   return landmark.id;
@@ -516,7 +595,8 @@ void PoseEkf::retireLandmark(std::size_t index) {
     P_new.bottomRightCorner(tail, tail) = P_.bottomRightCorner(tail, tail);
   }
   P_ = std::move(P_new);
-  retired_.push_back({landmarks_[index].d_world, vp_calls_ + config_.landmark_retry_calls});
+  retired_.push_back({landmarks_[index].d_world, landmarks_[index].kind,
+                      clock(landmarks_[index].kind) + config_.landmark_retry_calls});
   landmarks_.erase(landmarks_.begin() + static_cast<std::ptrdiff_t>(index));
   ++counters_.landmarks_retired;
 }
@@ -524,7 +604,7 @@ void PoseEkf::retireLandmark(std::size_t index) {
 bool PoseEkf::nearRetired(const Eigen::Vector3d& d_world) const {
   const double separation_cos = std::cos(config_.landmark_min_separation_deg * kDegToRad);
   return std::any_of(retired_.begin(), retired_.end(), [&](const Retired& r) {
-    return r.until_call > vp_calls_ && std::abs(r.d_world.dot(d_world)) > separation_cos;
+    return r.until_tick > clock(r.kind) && std::abs(r.d_world.dot(d_world)) > separation_cos;
   });
 }
 

@@ -4,7 +4,10 @@ namespace slamd {
 
 VanishingPointFilter::VanishingPointFilter(const FilterConfig& config,
                                            const CameraIntrinsics& intrinsics)
-    : config_(config), detector_(intrinsics, config.vp), ekf_(config, intrinsics) {}
+    : config_(config),
+      detector_(intrinsics, config.vp),
+      axis_detector_(config.axes, intrinsics),
+      ekf_(config, intrinsics) {}
 
 FilterOutput VanishingPointFilter::process(const FilterInput& input) {
   FilterOutput out;
@@ -16,6 +19,13 @@ FilterOutput VanishingPointFilter::process(const FilterInput& input) {
         out.vanishing_point->num_supporting_lines >= config_.min_update_lines) {
       out.update =
           ekf_.updateVanishingPoint(out.vanishing_point->pixel, out.vanishing_point->pixel_covariance);
+    }
+  }
+  if (config_.enabled && config_.surface_axes &&
+      (input.surface_axes || !input.depth_m.empty())) {
+    out.surface_axes = input.surface_axes ? *input.surface_axes : axis_detector_.detect(input.depth_m);
+    for (const SurfaceAxis& axis : out.surface_axes->axes) {
+      out.axis_updates.push_back(ekf_.updateDirection(axis.direction_camera, axis.covariance));
     }
   }
   out.pose.utime = input.utime;

@@ -9,6 +9,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <random>
 #include <vector>
 
@@ -86,6 +87,40 @@ inline cv::Mat renderCorridor(const CameraIntrinsics& K, const SE3& T_world_came
 inline Eigen::Vector2d corridorVanishingPoint(const CameraIntrinsics& K,
                                               const Eigen::Matrix3d& R_world_camera) {
   return K.project(R_world_camera.transpose() * Eigen::Vector3d::UnitZ());
+}
+
+/// Depth image (CV_32FC1 metres, NaN = none) of the corridor's walls, floor and ceiling seen from
+/// T_world_camera. With noise_seed > 0, Kinect-like noise is added in inverse depth (sigma 0.0015
+/// per metre, about 6 mm at 2 m).
+inline cv::Mat renderCorridorDepth(const CameraIntrinsics& K, const SE3& T_world_camera,
+                                   unsigned noise_seed = 0) {
+  constexpr double kHalfWidth = 1.0, kFloor = 1.2, kCeiling = -1.4;
+  std::mt19937 rng(noise_seed);
+  std::normal_distribution<double> noise(0.0, 0.0015);
+  cv::Mat depth(K.height, K.width, CV_32FC1, cv::Scalar(std::numeric_limits<float>::quiet_NaN()));
+  const Eigen::Matrix3d R = T_world_camera.linear();
+  const Eigen::Vector3d o = T_world_camera.translation();
+  for (int v = 0; v < K.height; ++v) {
+    for (int u = 0; u < K.width; ++u) {
+      const Eigen::Vector3d ray_c = K.ray(u, v);  // z = 1: the distance along it is the depth
+      const Eigen::Vector3d ray_w = R * ray_c;
+      double best = std::numeric_limits<double>::infinity();
+      const auto hit = [&](double position, double origin, double direction) {
+        if (std::abs(direction) < 1e-12) return;
+        const double t = (position - origin) / direction;
+        if (t > 0.0 && t < best) best = t;
+      };
+      hit(-kHalfWidth, o.x(), ray_w.x());
+      hit(kHalfWidth, o.x(), ray_w.x());
+      hit(kFloor, o.y(), ray_w.y());
+      hit(kCeiling, o.y(), ray_w.y());
+      if (!std::isfinite(best)) continue;
+      double inverse_depth = 1.0 / best;
+      if (noise_seed > 0) inverse_depth += noise(rng);
+      depth.at<float>(v, u) = static_cast<float>(1.0 / inverse_depth);
+    }
+  }
+  return depth;
 }
 
 /// Rotation from yaw (about y, down), pitch (about x, right) and roll (about z, forward), radians.

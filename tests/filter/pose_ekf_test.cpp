@@ -51,6 +51,22 @@ TEST(PoseEkf, MotionJacobiansMatchCentralDifferences) {
   }
 }
 
+/// Central-difference Jacobians of a 2-vector function h(R, d) of a rotation (right perturbation)
+/// and a unit direction (tangent perturbation, retractDirection) at (R, d).
+template <typename Function>
+void numericDirectionJacobians(const Function& h, const Eigen::Matrix3d& R, const Eigen::Vector3d& d,
+                               Eigen::Matrix<double, 2, 3>* H_rotation, Eigen::Matrix2d* H_direction) {
+  for (int k = 0; k < 3; ++k) {
+    const Eigen::Vector3d e = kStep * Eigen::Vector3d::Unit(k);
+    H_rotation->col(k) = (h(R * expSO3(e), d) - h(R * expSO3(-e), d)) / (2 * kStep);
+  }
+  for (int k = 0; k < 2; ++k) {
+    const Eigen::Vector2d e = kStep * Eigen::Vector2d::Unit(k);
+    H_direction->col(k) = (h(R, PoseEkf::retractDirection(d, e)) -
+                           h(R, PoseEkf::retractDirection(d, -e))) / (2 * kStep);
+  }
+}
+
 TEST(PoseEkf, ProjectionJacobiansMatchCentralDifferences) {
   const CameraIntrinsics K;
   std::mt19937 rng(7);
@@ -69,16 +85,8 @@ TEST(PoseEkf, ProjectionJacobiansMatchCentralDifferences) {
       return p;
     };
     Eigen::Matrix<double, 2, 3> H_rot_num;
-    for (int k = 0; k < 3; ++k) {
-      const Eigen::Vector3d e = kStep * Eigen::Vector3d::Unit(k);
-      H_rot_num.col(k) = (h(R * expSO3(e), d) - h(R * expSO3(-e), d)) / (2 * kStep);
-    }
     Eigen::Matrix2d H_dir_num;
-    for (int k = 0; k < 2; ++k) {
-      const Eigen::Vector2d e = kStep * Eigen::Vector2d::Unit(k);
-      H_dir_num.col(k) = (h(R, PoseEkf::retractDirection(d, e)) -
-                          h(R, PoseEkf::retractDirection(d, -e))) / (2 * kStep);
-    }
+    numericDirectionJacobians(h, R, d, &H_rot_num, &H_dir_num);
     EXPECT_LT((H_rot - H_rot_num).cwiseAbs().maxCoeff(), 1e-4 * H_rot.cwiseAbs().maxCoeff());
     EXPECT_LT((H_dir - H_dir_num).cwiseAbs().maxCoeff(), 1e-4 * H_dir.cwiseAbs().maxCoeff());
     // A point at infinity: translation never matters.
@@ -132,6 +140,129 @@ struct OneLandmarkFixture {
     for (int i = 0; i < 5; ++i) EXPECT_EQ(ekf.predict(step, Q, 1.0 / 30), EkfPredictStatus::kOk);
   }
 };
+
+TEST(PoseEkf, PlaneAxisJacobiansMatchCentralDifferences) {
+  std::mt19937 rng(11);
+  for (int trial = 0; trial < 10; ++trial) {
+    const Eigen::Matrix3d R = randomPose(rng, 0.0, 0.5).linear();
+    const Eigen::Vector3d d = (R * Eigen::Vector3d(0.1, trial % 2 ? 0.95 : -0.2, 0.3)).normalized();
+    // Measured near the landmark's axis, with either sign (the axis is unoriented).
+    Eigen::Vector3d m = PoseEkf::retractDirection(R.transpose() * d, Eigen::Vector2d(0.01, -0.02));
+    if (trial % 3 == 0) m = -m;
+    Eigen::Vector2d predicted;
+    Eigen::Matrix<double, 2, 3> H_rot;
+    Eigen::Matrix2d H_dir;
+    ASSERT_TRUE(PoseEkf::predictAxis(R, d, m, &predicted, &H_rot, &H_dir));
+    const auto h = [&](const Eigen::Matrix3d& Rx, const Eigen::Vector3d& dx) {
+      Eigen::Vector2d p;
+      EXPECT_TRUE(PoseEkf::predictAxis(Rx, dx, m, &p, nullptr, nullptr));
+      return p;
+    };
+    Eigen::Matrix<double, 2, 3> H_rot_num;
+    Eigen::Matrix2d H_dir_num;
+    numericDirectionJacobians(h, R, d, &H_rot_num, &H_dir_num);
+    EXPECT_LT((H_rot - H_rot_num).cwiseAbs().maxCoeff(), 1e-6) << H_rot << "\n" << H_rot_num;
+    EXPECT_LT((H_dir - H_dir_num).cwiseAbs().maxCoeff(), 1e-6) << H_dir << "\n" << H_dir_num;
+    // The measured axis itself predicts zero in its own tangent plane.
+    Eigen::Vector2d at_truth;
+    ASSERT_TRUE(PoseEkf::predictAxis(R, R * m, m, &at_truth, nullptr, nullptr));
+    EXPECT_LT(at_truth.norm(), 1e-12);
+
+    // directionFromAxis: d = R m and its tangent-error Jacobians.
+    Eigen::Matrix<double, 2, 3> J_rot;
+    Eigen::Matrix2d J_axis;
+    const Eigen::Vector3d d0 = PoseEkf::directionFromAxis(R, m, &J_rot, &J_axis);
+    EXPECT_LT((d0 - R * m).norm(), 1e-12);
+    Eigen::Matrix<double, 2, 3> J_rot_num;
+    for (int k = 0; k < 3; ++k) {
+      const Eigen::Vector3d e = kStep * Eigen::Vector3d::Unit(k);
+      J_rot_num.col(k) =
+          (localDirection(d0, PoseEkf::directionFromAxis(R * expSO3(e), m, nullptr, nullptr)) -
+           localDirection(d0, PoseEkf::directionFromAxis(R * expSO3(-e), m, nullptr, nullptr))) /
+          (2 * kStep);
+    }
+    Eigen::Matrix2d J_axis_num;
+    for (int k = 0; k < 2; ++k) {
+      const Eigen::Vector2d e = kStep * Eigen::Vector2d::Unit(k);
+      J_axis_num.col(k) =
+          (localDirection(d0, PoseEkf::directionFromAxis(R, PoseEkf::retractDirection(m, e),
+                                                         nullptr, nullptr)) -
+           localDirection(d0, PoseEkf::directionFromAxis(R, PoseEkf::retractDirection(m, -e),
+                                                         nullptr, nullptr))) /
+          (2 * kStep);
+    }
+    EXPECT_LT((J_rot - J_rot_num).cwiseAbs().maxCoeff(), 1e-6);
+    EXPECT_LT((J_axis - J_axis_num).cwiseAbs().maxCoeff(), 1e-6);
+  }
+}
+
+/// A camera looking down a corridor (+z) whose odometry drifts in roll (about the corridor axis)
+/// by 0.02 degrees per frame; the vanishing point of +z is seen every frame, and with
+/// `with_floor_axis` the floor's axis (+y) too. Returns the final roll error, degrees.
+double rollErrorAfterDrift(bool with_floor_axis, int* axis_updates_accepted) {
+  const CameraIntrinsics K;
+  FilterConfig config;
+  PoseEkf ekf(config, K);
+  std::mt19937 rng(5);
+  std::normal_distribution<double> pixel_noise(0.0, 0.5), angle_noise(0.0, 0.002);
+  constexpr double kRollBiasRad = 0.02 * M_PI / 180.0;
+  SE3 T_world_true = SE3::Identity();
+  const SE3 step_true(Eigen::Translation3d(0.0, 0.0, 0.03));
+  Matrix6d odometry_cov = Matrix6d::Zero();
+  // Rotation sigma 0.026 deg per frame: the drift is within what odometry claims.
+  odometry_cov.diagonal() << 1e-6, 1e-6, 1e-6, 2e-7, 2e-7, 2e-7;
+  for (int frame = 0; frame < 300; ++frame) {
+    SE3 step_measured = step_true;
+    step_measured.linear() = expSO3(Eigen::Vector3d(0.0, 0.0, kRollBiasRad));
+    T_world_true = T_world_true * step_true;
+    ekf.predict(step_measured, odometry_cov, 1.0 / 30.0);
+    const Eigen::Matrix3d R_true = T_world_true.linear();
+    const Eigen::Vector2d vp = K.project(R_true.transpose() * Eigen::Vector3d::UnitZ()) +
+                               Eigen::Vector2d(pixel_noise(rng), pixel_noise(rng));
+    ekf.updateVanishingPoint(vp, 0.25 * Eigen::Matrix2d::Identity());
+    if (with_floor_axis) {
+      const Eigen::Vector3d floor_true = R_true.transpose() * Eigen::Vector3d::UnitY();
+      const Eigen::Vector3d floor_seen = PoseEkf::retractDirection(
+          floor_true, Eigen::Vector2d(angle_noise(rng), angle_noise(rng)));
+      ekf.updateDirection(floor_seen, 4e-6 * Eigen::Matrix2d::Identity());
+    }
+  }
+  *axis_updates_accepted = static_cast<int>(ekf.counters().axis_updates_accepted);
+  const Eigen::Vector3d error =
+      logSO3(T_world_true.linear().transpose() * ekf.T_world_camera().linear());
+  return std::abs(error.z()) * 180.0 / M_PI;
+}
+
+TEST(PoseEkf, FloorAxisMakesTheRollAboutTheCorridorObservable) {
+  int accepted_without = 0, accepted_with = 0;
+  const double roll_vp_only = rollErrorAfterDrift(false, &accepted_without);
+  const double roll_with_axis = rollErrorAfterDrift(true, &accepted_with);
+  // One vanishing point cannot see the roll about its own axis: the drift (6 degrees) stays.
+  EXPECT_GT(roll_vp_only, 5.0);
+  EXPECT_EQ(accepted_without, 0);
+  // The floor's axis pins it, once its landmark has passed probation.
+  EXPECT_LT(roll_with_axis, 0.5);
+  EXPECT_GT(accepted_with, 200);  // of 300: 3 to confirm, 10 on probation, a few gated
+  RecordProperty("roll_vp_only_deg", std::to_string(roll_vp_only));
+  RecordProperty("roll_with_axis_deg", std::to_string(roll_with_axis));
+}
+
+TEST(PoseEkf, BadPlaneAxisIsRejectedAndCounted) {
+  const CameraIntrinsics K;
+  PoseEkf ekf(FilterConfig{}, K);
+  const Eigen::Matrix2d good = 1e-4 * Eigen::Matrix2d::Identity();
+  EXPECT_EQ(ekf.updateDirection(Eigen::Vector3d(0.0, 2.0, 0.0), good).status,
+            VpUpdateStatus::kBadMeasurement);  // not a unit vector
+  EXPECT_EQ(ekf.updateDirection(Eigen::Vector3d(std::nan(""), 1.0, 0.0), good).status,
+            VpUpdateStatus::kBadMeasurement);
+  Eigen::Matrix2d not_positive = good;
+  not_positive(1, 1) = -1e-4;
+  EXPECT_EQ(ekf.updateDirection(Eigen::Vector3d::UnitY(), not_positive).status,
+            VpUpdateStatus::kBadMeasurement);
+  EXPECT_EQ(ekf.counters().bad_measurements, 3);
+  EXPECT_EQ(ekf.updateDirection(Eigen::Vector3d::UnitY(), good).status,
+            VpUpdateStatus::kCandidate);
+}
 
 TEST(PoseEkf, AcceptsAConsistentVanishingPointAndShrinksRotationUncertainty) {
   OneLandmarkFixture f;

@@ -63,6 +63,18 @@
 // do harm.
 // Covariance updates use the Joseph form (I - KH) P (I - KH)^T + K R K^T.
 //
+// Plane axes (updateDirection, from SurfaceAxisDetector: Manhattan directions told apart by depth
+// normals). A measured unoriented unit axis m in the camera frame, with covariance Sigma (rad^2) in
+// B(m), observes the same landmarks: the prediction, expressed in the measured axis' tangent
+// plane,
+//   h(x) = B(m)^T s R^T d,   s = sign(m . R^T d)   (the measurement itself is 0 there),
+//   dh/ddtheta = s B(m)^T [R^T d]x,   dh/ddl = s B(m)^T R^T B(d),   dh/ddt = 0,
+// so the innovation is -h(x) and R = Sigma. A floor or wall axis is perpendicular to the
+// corridor's vanishing direction and observes the roll about it, which one vanishing point cannot.
+// Association, gating, candidates, probation and retirement are shared with vanishing points (a
+// vanishing point and an end wall's normal are the same axis); candidates from plane axes are
+// confirmed over consecutive predictions (frames) rather than consecutive vanishing points.
+//
 // Bad input (non-finite motion or pixel, NaN or non-positive-(semi)definite covariances) never
 // throws: it is rejected or replaced by a documented fallback, reported by the status and counted.
 
@@ -94,12 +106,21 @@ enum class VpUpdateStatus : std::int8_t {
   kProbation,       ///< inside the gate of a landmark on probation: counted, state unchanged
 };
 
+/// What a measurement of a world direction is.
+enum class DirectionMeasurement : std::int8_t {
+  kVanishingPoint = 0,  ///< a vanishing point, pixels
+  kSurfaceAxis,         ///< a plane axis from depth normals, unit vector in the camera frame
+};
+
 const char* ekfPredictStatusName(EkfPredictStatus status);
 const char* vpUpdateStatusName(VpUpdateStatus status);
 
 /// What one vanishing-point update did (fields of slamd.vanishing_point_t and of the status
 /// channel).
+/// For kSurfaceAxis measurements the *_px fields hold radians in the tangent basis of the measured
+/// axis (measured is 0 there by construction), and the innovation covariance is in rad^2.
 struct VpUpdateResult {
+  DirectionMeasurement measurement = DirectionMeasurement::kVanishingPoint;
   VpUpdateStatus status = VpUpdateStatus::kBadMeasurement;
   bool accepted = false;  ///< true for kAccepted only
   int landmark_id = -1;   ///< associated (or best, when gated; or created) landmark, -1 none
@@ -116,6 +137,8 @@ struct DirectionLandmark {
   Eigen::Vector3d d_world = Eigen::Vector3d::UnitZ();  ///< unit axis, world frame
   std::int64_t num_updates = 0;
   bool active = true;  ///< false while on probation (tested, never applied)
+  /// the kind of measurement it was created from (whose clock times its retirement)
+  DirectionMeasurement kind = DirectionMeasurement::kVanishingPoint;
   /// NIS of the recent detections of its direction: the probation's, then a ring of the last
   /// landmark_window (consistency statistics).
   std::vector<double> recent_nis;
@@ -134,6 +157,8 @@ struct EkfCounters {
   std::int64_t landmarks_activated = 0;  ///< passed probation
   std::int64_t landmarks_retired = 0;    ///< failed probation or gated too often
   std::int64_t probation_tests = 0;
+  std::int64_t axis_updates_accepted = 0;  ///< of updates_accepted: from plane axes
+  std::int64_t axis_updates_gated = 0;     ///< of updates_gated: from plane axes
 };
 
 class PoseEkf {
@@ -162,6 +187,13 @@ class PoseEkf {
   /// Update against one given landmark (known association), with the same gate.
   VpUpdateResult updateLandmark(int landmark_id, const Eigen::Vector2d& pixel,
                                 const Eigen::Matrix2d& pixel_covariance);
+
+  /// Associates a plane axis (unit vector in the camera frame, sign ignored; covariance 2x2 in
+  /// tangentBasis(direction_camera), rad^2) with the landmarks, gates and updates, or counts it
+  /// towards a new landmark, exactly as updateVanishingPoint(). A non-unit or non-finite axis or a
+  /// covariance that is NaN or not positive definite gives kBadMeasurement (counted).
+  VpUpdateResult updateDirection(const Eigen::Vector3d& direction_camera,
+                                 const Eigen::Matrix2d& covariance);
 
   /// Adds an active landmark from a vanishing point seen now (no confirmation, no probation);
   /// returns its id, or -1 when the input is bad or max_landmarks is reached.
@@ -205,6 +237,18 @@ class PoseEkf {
                                const Eigen::Vector3d& d_world, Eigen::Vector2d* pixel,
                                Eigen::Matrix<double, 2, 3>* H_rotation,
                                Eigen::Matrix2d* H_direction);
+  /// Prediction of a measured plane axis m (unit, camera frame) in its tangent basis B(m):
+  /// h = B(m)^T s R^T d with s = sign(m . R^T d), and its Jacobians with respect to the rotation
+  /// error (2x3) and the landmark tangent error (2x2). False when m is perpendicular to R^T d.
+  static bool predictAxis(const Eigen::Matrix3d& R_world_camera, const Eigen::Vector3d& d_world,
+                          const Eigen::Vector3d& measured_camera, Eigen::Vector2d* predicted,
+                          Eigen::Matrix<double, 2, 3>* H_rotation, Eigen::Matrix2d* H_direction);
+  /// World direction d = R m of a camera-frame axis m, and the Jacobians of its tangent error (in
+  /// B(d)) with respect to the rotation error (2x3) and the axis' own tangent error (in B(m), 2x2).
+  static Eigen::Vector3d directionFromAxis(const Eigen::Matrix3d& R_world_camera,
+                                           const Eigen::Vector3d& axis_camera,
+                                           Eigen::Matrix<double, 2, 3>* J_rotation,
+                                           Eigen::Matrix2d* J_axis);
   /// World direction of a vanishing pixel, d = R K^-1 [u 1] / |.|, and the Jacobians of its
   /// tangent error (in B(d)) with respect to the rotation error (2x3) and the pixel (2x2).
   static Eigen::Vector3d directionFromPixel(const CameraIntrinsics& K,
@@ -214,21 +258,37 @@ class PoseEkf {
                                             Eigen::Matrix2d* J_pixel);
 
  private:
+  /// One measurement of a world direction, validated: a vanishing point (pixel) or a plane axis
+  /// (axis_camera), with its noise R (pixels^2, or rad^2 in B(axis_camera)).
+  struct Observation {
+    DirectionMeasurement kind = DirectionMeasurement::kVanishingPoint;
+    Eigen::Vector2d pixel = Eigen::Vector2d::Zero();
+    Eigen::Vector3d axis_camera = Eigen::Vector3d::UnitZ();
+    Eigen::Matrix2d R = Eigen::Matrix2d::Identity();
+  };
   struct Candidate {
+    DirectionMeasurement kind = DirectionMeasurement::kVanishingPoint;
     Eigen::Vector3d d_world;
     int count = 0;
-    std::int64_t last_call = 0;
+    std::int64_t last_tick = 0;  ///< clock(kind) when last seen
   };
 
+  /// The clock candidates of this kind are confirmed on: vanishing-point calls, or predictions.
+  std::int64_t clock(DirectionMeasurement kind) const;
+  /// Association, gate, update or candidate bookkeeping for a validated observation.
+  VpUpdateResult updateObservation(const Observation& observation);
+  /// World direction of an observation, with the Jacobians of its tangent error.
+  Eigen::Vector3d worldDirection(const Observation& observation,
+                                 Eigen::Matrix<double, 2, 3>* J_rotation,
+                                 Eigen::Matrix2d* J_measurement) const;
   /// NIS and pieces for landmark index i; false when not visible.
-  bool innovation(std::size_t index, const Eigen::Vector2d& pixel, const Eigen::Matrix2d& R_px,
-                  VpUpdateResult* result, Eigen::MatrixXd* H) const;
+  bool innovation(std::size_t index, const Observation& observation, VpUpdateResult* result,
+                  Eigen::MatrixXd* H) const;
   void applyUpdate(const Eigen::MatrixXd& H, const Eigen::Vector2d& innovation,
                    const Eigen::Matrix2d& S, const Eigen::Matrix2d& R_px);
-  void acceptUpdate(std::size_t index, const Eigen::MatrixXd& H, const Eigen::Matrix2d& R_px,
+  void acceptUpdate(std::size_t index, const Eigen::MatrixXd& H, const Observation& observation,
                     VpUpdateResult* result);
-  int addLandmarkUnchecked(const Eigen::Vector2d& pixel, const Eigen::Matrix2d& R_px,
-                           bool active);
+  int addLandmarkUnchecked(const Observation& observation, bool active);
   /// Records the NIS of a detection of landmark index's direction for its consistency statistics;
   /// may activate or retire it. Returns false when the landmark was retired (indices shift).
   bool recordOutcome(std::size_t index, double nis);
@@ -245,7 +305,10 @@ class PoseEkf {
   std::vector<Candidate> candidates_;
   struct Retired {
     Eigen::Vector3d d_world;
-    std::int64_t until_call = 0;  ///< blocked for new landmarks until this updateVanishingPoint call
+    /// the kind of the measurement whose landmark was retired; blocked for new landmarks while
+    /// clock(kind) is below until_tick
+    DirectionMeasurement kind = DirectionMeasurement::kVanishingPoint;
+    std::int64_t until_tick = 0;
   };
   std::vector<Retired> retired_;
   std::int64_t vp_calls_ = 0;

@@ -6,22 +6,25 @@
 // inside, not thread-safe):
 //   VanishingPointFilter filter(FilterConfig::load(config), intrinsics);
 //   for each odometry increment:
-//     FilterInput in{utime, T_prev_curr, covariance, dt_s, frame.gray};  // gray may be empty
-//     FilterOutput out = filter.process(in);
+//     FilterInput in{utime, T_prev_curr, covariance, dt_s, frame.gray, frame.depth_m};
+//     FilterOutput out = filter.process(in);  // gray and depth_m may be empty
 // or, with the detection done elsewhere (e.g. on a thread running in parallel with tracking, with
 // its own VanishingPointDetector built from the same FilterConfig and intrinsics):
 //     in.detection = detector.detect(frame.gray);  // then in.gray is not needed and not used
+//     in.surface_axes = axis_detector.detect(frame.depth_m);  // likewise for in.depth_m
 //     FilterOutput out = filter.process(in);
 //     publish(out.pose);                              // T_world_camera + 6x6, source kFilter
 //     if (out.vanishing_point) publish(out.vanishing_point, out.update);  // vanishing_point_t
 //
 // With filter.enabled = false the increments are only chained (the pose covariance still grows
 // with each odometry covariance), so the output stays comparable; with filter.vanishing_points =
-// false images are ignored. Conventions: see PoseEkf (world = first camera frame, covariances in
+// false images are ignored, with filter.surface_axes = false depth images. Each frame's vanishing
+// point updates the EKF first, then its plane axes (strongest first). Conventions: see PoseEkf (world = first camera frame, covariances in
 // slamd's x y z rx ry rz order, rotation a right perturbation in the camera frame).
 
 #include <cstdint>
 #include <optional>
+#include <vector>
 
 #include <opencv2/core.hpp>
 
@@ -29,6 +32,7 @@
 #include "slamd/common/pose_estimate.hpp"
 #include "slamd/filter/filter_config.hpp"
 #include "slamd/filter/pose_ekf.hpp"
+#include "slamd/filter/surface_axes.hpp"
 #include "slamd/filter/vanishing_point_detector.hpp"
 
 namespace slamd {
@@ -41,11 +45,16 @@ struct FilterInput {
   Matrix6d covariance = Matrix6d::Identity() * 1e-6;
   double dt_s = 0.0;  ///< seconds since the previous frame
   cv::Mat gray;       ///< CV_8UC1 image of the current frame, or empty
+  cv::Mat depth_m;    ///< CV_32FC1 depth of the current frame (metres, NaN = none), or empty
   /// Precomputed detection of the current frame (VanishingPointDetector::detect on this frame's
   /// grey image, same intrinsics). When set, process() uses it as is and runs no detector of its
   /// own (gray is ignored); when empty, process() detects on gray (if any). Either way it is
   /// used only with filter.enabled and filter.vanishing_points.
   std::optional<VanishingPoint> detection;
+  /// Precomputed plane axes of the current frame (SurfaceAxisDetector::detect on its depth, same
+  /// options and intrinsics): used as is instead of detecting on depth_m. Used only with
+  /// filter.enabled and filter.surface_axes.
+  std::optional<SurfaceAxes> surface_axes;
 };
 
 struct FilterOutput {
@@ -57,6 +66,10 @@ struct FilterOutput {
   /// Set when a vanishing point was found and handed to the EKF (only those supported by at least
   /// filter.min_update_lines lines are).
   std::optional<VpUpdateResult> update;
+  /// Set when a depth image or precomputed axes were given and surface axes are enabled.
+  std::optional<SurfaceAxes> surface_axes;
+  /// One result per axis handed to the EKF (in the order of surface_axes->axes).
+  std::vector<VpUpdateResult> axis_updates;
 };
 
 class VanishingPointFilter {
@@ -68,11 +81,13 @@ class VanishingPointFilter {
   PoseEkf& ekf() { return ekf_; }
   const PoseEkf& ekf() const { return ekf_; }
   const VanishingPointDetector& detector() const { return detector_; }
+  const SurfaceAxisDetector& axisDetector() const { return axis_detector_; }
   std::int64_t steps() const { return steps_; }
 
  private:
   FilterConfig config_;
   VanishingPointDetector detector_;
+  SurfaceAxisDetector axis_detector_;
   PoseEkf ekf_;
   std::int64_t steps_ = 0;
 };
