@@ -10,6 +10,7 @@
 // Depth pre-processing of the daemon's capture stage is not applied, so the odometry can differ
 // slightly from a slamd run; the daemon's numbers are the reference, this is a quick loop.
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <ctime>
@@ -87,23 +88,41 @@ double percentile(std::vector<double> v, double p) {
   return v[static_cast<std::size_t>(std::min<double>(v.size() - 1, p / 100.0 * v.size()))];
 }
 
-/// Rotation error at the end (ground truth vs estimate, the estimate expressed in the ground
-/// truth's world through the first pose), about the world axes, degrees.
-Eigen::Vector3d endRotationErrorDeg(const Trajectory& gt, const Trajectory& est) {
+/// Rotation error of every estimated pose that has ground truth within 20 ms (ground truth vs
+/// estimate, the estimate expressed in the ground truth's world through the first pose), about the
+/// world axes, degrees, in time order.
+std::vector<Eigen::Vector3d> rotationErrorsDeg(const Trajectory& gt, const Trajectory& est) {
+  std::vector<Eigen::Vector3d> errors;
   const auto nearest = [&](double t) -> const StampedPose* {
+    const auto it = std::lower_bound(gt.begin(), gt.end(), t, [](const StampedPose& p, double s) {
+      return p.timestamp_s < s;
+    });
     const StampedPose* best = nullptr;
-    for (const auto& p : gt) {
-      if (!best || std::abs(p.timestamp_s - t) < std::abs(best->timestamp_s - t)) best = &p;
+    if (it != gt.end()) best = &*it;
+    if (it != gt.begin() && (!best || t - std::prev(it)->timestamp_s < best->timestamp_s - t)) {
+      best = &*std::prev(it);
     }
     return best && std::abs(best->timestamp_s - t) < 0.02 ? best : nullptr;
   };
+  if (est.empty()) return errors;
   const StampedPose* g0 = nearest(est.front().timestamp_s);
-  const StampedPose* g1 = nearest(est.back().timestamp_s);
-  if (!g0 || !g1) return Eigen::Vector3d::Constant(NAN);
-  const Eigen::Matrix3d R_est_world = g0->T_world_camera.linear() *
-                                      est.front().T_world_camera.linear().transpose() *
-                                      est.back().T_world_camera.linear();
-  return logSO3(g1->T_world_camera.linear() * R_est_world.transpose()) * 180.0 / M_PI;
+  if (!g0) return errors;
+  const Eigen::Matrix3d R_gt_est = g0->T_world_camera.linear() *
+                                   est.front().T_world_camera.linear().transpose();
+  for (const StampedPose& p : est) {
+    const StampedPose* g = nearest(p.timestamp_s);
+    if (!g) continue;
+    const Eigen::Matrix3d R_est_world = R_gt_est * p.T_world_camera.linear();
+    errors.push_back(logSO3(g->T_world_camera.linear() * R_est_world.transpose()) * 180.0 / M_PI);
+  }
+  return errors;
+}
+
+Eigen::Vector3d rmsPerAxis(const std::vector<Eigen::Vector3d>& errors) {
+  Eigen::Vector3d sum_sq = Eigen::Vector3d::Zero();
+  for (const auto& e : errors) sum_sq += e.cwiseProduct(e);
+  return errors.empty() ? Eigen::Vector3d::Constant(NAN)
+                        : Eigen::Vector3d((sum_sq / static_cast<double>(errors.size())).cwiseSqrt());
 }
 
 }  // namespace
@@ -263,14 +282,29 @@ int main(int argc, char** argv) {
   if (const auto gt = source->groundTruth(); gt && !gt->empty() && frames > 2) {
     const double ate_odo = eval::computeAte(*gt, odometry_only).translation_m.rmse;
     const double ate_filter = eval::computeAte(*gt, filtered).translation_m.rmse;
-    const Eigen::Vector3d rot_odo = endRotationErrorDeg(*gt, odometry_only);
-    const Eigen::Vector3d rot_filter = endRotationErrorDeg(*gt, filtered);
+    const std::vector<Eigen::Vector3d> rot_odo = rotationErrorsDeg(*gt, odometry_only);
+    const std::vector<Eigen::Vector3d> rot_filter = rotationErrorsDeg(*gt, filtered);
+    const Eigen::Vector3d nan3 = Eigen::Vector3d::Constant(NAN);
+    const Eigen::Vector3d end_odo = rot_odo.empty() ? nan3 : rot_odo.back();
+    const Eigen::Vector3d end_filter = rot_filter.empty() ? nan3 : rot_filter.back();
+    const Eigen::Vector3d rms_odo = rmsPerAxis(rot_odo), rms_filter = rmsPerAxis(rot_filter);
     std::printf("ATE odometry %.4f m, filter %.4f m (%.3fx)\n", ate_odo, ate_filter,
                 ate_filter / ate_odo);
     std::printf("end rotation error about world x y z (deg): odometry %.3f %.3f %.3f, filter "
                 "%.3f %.3f %.3f\n",
-                rot_odo.x(), rot_odo.y(), rot_odo.z(), rot_filter.x(), rot_filter.y(),
-                rot_filter.z());
+                end_odo.x(), end_odo.y(), end_odo.z(), end_filter.x(), end_filter.y(),
+                end_filter.z());
+    std::printf("RMS rotation error about world x y z (deg): odometry %.3f %.3f %.3f, filter "
+                "%.3f %.3f %.3f\n",
+                rms_odo.x(), rms_odo.y(), rms_odo.z(), rms_filter.x(), rms_filter.y(),
+                rms_filter.z());
+    // One line for scripts (bench/filter/corridor_eval.sh).
+    std::printf("summary ate_odometry_m=%.6f ate_filter_m=%.6f end_odometry_deg=%.4f,%.4f,%.4f "
+                "end_filter_deg=%.4f,%.4f,%.4f rms_odometry_deg=%.4f,%.4f,%.4f "
+                "rms_filter_deg=%.4f,%.4f,%.4f vp_nis_mean=%.3f filter_cpu_median_ms=%.3f\n",
+                ate_odo, ate_filter, end_odo.x(), end_odo.y(), end_odo.z(), end_filter.x(),
+                end_filter.y(), end_filter.z(), rms_odo.x(), rms_odo.y(), rms_odo.z(),
+                rms_filter.x(), rms_filter.y(), rms_filter.z(), nis_mean, percentile(cpu_ms, 50));
   }
   return 0;
 }
