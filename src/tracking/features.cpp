@@ -282,7 +282,7 @@ std::vector<Eigen::Vector2d> undistortPixels(const std::vector<cv::Point2f>& raw
 
 bool alignPatch(const cv::Mat& templ, const cv::Point2f& templ_px, const cv::Mat& image,
                 const cv::Point2f& initial_px, double max_shift_px, cv::Point2f& aligned_px,
-                const cv::Matx22d& ref_from_curr) {
+                const cv::Matx33d& ref_from_curr) {
   constexpr int kHalf = 4;              // 9x9 patch
   constexpr int kSide = 2 * kHalf + 1;
   constexpr int kBorder = kHalf + 2;
@@ -298,9 +298,24 @@ bool alignPatch(const cv::Mat& templ, const cv::Point2f& templ_px, const cv::Mat
     const std::uint8_t* r1 = img.ptr<std::uint8_t>(y0 + 1) + x0;
     return (1 - ay) * ((1 - ax) * r0[0] + ax * r0[1]) + ay * ((1 - ax) * r1[0] + ax * r1[1]);
   };
-  // The warped template reaches further than kHalf + 1 when ref_from_curr magnifies.
-  const double reach = (kHalf + 1) * std::max(std::abs(ref_from_curr(0, 0)) + std::abs(ref_from_curr(0, 1)),
-                                              std::abs(ref_from_curr(1, 0)) + std::abs(ref_from_curr(1, 1)));
+  // Offset in templ of the pixel offset (dx, dy) in image; w is the homogeneous scale.
+  auto warp = [&ref_from_curr](double dx, double dy, double& rx, double& ry) {
+    const double w = ref_from_curr(2, 0) * dx + ref_from_curr(2, 1) * dy + ref_from_curr(2, 2);
+    if (!(w > 0.0)) return false;
+    rx = (ref_from_curr(0, 0) * dx + ref_from_curr(0, 1) * dy + ref_from_curr(0, 2)) / w;
+    ry = (ref_from_curr(1, 0) * dx + ref_from_curr(1, 1) * dy + ref_from_curr(1, 2)) / w;
+    return true;
+  };
+  // The warped template reaches further than kHalf + 1 when ref_from_curr magnifies; the image of
+  // the square is a convex quadrilateral (w > 0 at its corners), so its corners bound it.
+  double reach = 0.0;
+  for (const double cy : {-1.0, 1.0}) {
+    for (const double cx : {-1.0, 1.0}) {
+      double rx = 0.0, ry = 0.0;
+      if (!warp(cx * (kHalf + 1), cy * (kHalf + 1), rx, ry)) return false;
+      reach = std::max(reach, std::max(std::abs(rx), std::abs(ry)));
+    }
+  }
   if (templ.empty() || image.empty() || !(reach < 3 * kHalf) ||
       !inside(image, initial_px.x, initial_px.y)) {
     return false;
@@ -314,9 +329,9 @@ bool alignPatch(const cv::Mat& templ, const cv::Point2f& templ_px, const cv::Mat
   double t[kSide + 2][kSide + 2];
   for (int dy = -kHalf - 1; dy <= kHalf + 1; ++dy) {
     for (int dx = -kHalf - 1; dx <= kHalf + 1; ++dx) {
-      t[dy + kHalf + 1][dx + kHalf + 1] =
-          sample(templ, tx0 + ref_from_curr(0, 0) * dx + ref_from_curr(0, 1) * dy,
-                 ty0 + ref_from_curr(1, 0) * dx + ref_from_curr(1, 1) * dy);
+      double rx = 0.0, ry = 0.0;
+      warp(dx, dy, rx, ry);  // w > 0 inside the convex quadrilateral checked above
+      t[dy + kHalf + 1][dx + kHalf + 1] = sample(templ, tx0 + rx, ty0 + ry);
     }
   }
   double gx[kSide][kSide], gy[kSide][kSide], tv[kSide][kSide];

@@ -78,12 +78,14 @@ std::vector<Eigen::Vector2d> undistortPixels(const std::vector<cv::Point2f>& raw
 /// Sub-pixel alignment of a square patch (translation plus brightness offset, inverse
 /// compositional Lucas-Kanade): the position in `image` (raw pixels) of the patch of `templ`
 /// centred at templ_px, starting from initial_px. Returns false when it does not converge or
-/// leaves the image or moves more than max_shift_px from initial_px. ref_from_curr (2x2) maps a
-/// pixel offset in `image` to the offset in `templ` (the local affine part of the motion between
-/// the views; identity when they differ by a translation), so that rotated or scaled views align.
+/// leaves the image or moves more than max_shift_px from initial_px. ref_from_curr (3x3
+/// homography, (2, 2) = 1) maps a pixel offset (dx, dy, 1) in `image` to the homogeneous offset in
+/// `templ` (the motion between the views around the point: identity when they differ by a
+/// translation, affine for a rotated or scaled view, projective for a slanted surface), so that
+/// such views align.
 bool alignPatch(const cv::Mat& templ, const cv::Point2f& templ_px, const cv::Mat& image,
                 const cv::Point2f& initial_px, double max_shift_px, cv::Point2f& aligned_px,
-                const cv::Matx22d& ref_from_curr = cv::Matx22d::eye());
+                const cv::Matx33d& ref_from_curr = cv::Matx33d::eye());
 
 /// Keeps at most max_total features, at most max_total / (cols * rows) per grid cell (strongest
 /// response first); cells left under quota give their share to the strongest remaining ones.

@@ -110,8 +110,8 @@ struct AlignedInliers {
   std::vector<cv::Point2f> pixels_raw;     ///< aligned position in the current image (distorted)
 };
 
-/// Aligns each inlier's reference patch in the current image (alignPatch, warped by the local
-/// affine map of a fronto-parallel patch at the point's depth under T_ref_curr), so that the
+/// Aligns each inlier's reference patch in the current image (alignPatch, warped by the homography
+/// of the plane the reference depth shows around the point, under T_ref_curr), so that the
 /// correspondences become sub-pixel consistent with the reference keypoints rather than two
 /// independent detections. Needs both feature sets' align_gray and keypoints; otherwise nothing
 /// is aligned.
