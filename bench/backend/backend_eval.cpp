@@ -67,14 +67,6 @@ double percentileOf(std::vector<double> samples, double p) {
   return samples[std::min(index, samples.size() - 1)];
 }
 
-// Thread CPU time: what the work costs on one core, unaffected by other processes competing for
-// the CPU (the wall-clock times the back end reports include waiting for a core).
-double threadCpuMs() {
-  timespec ts{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
-  return static_cast<double>(ts.tv_sec) * 1e3 + static_cast<double>(ts.tv_nsec) * 1e-6;
-}
-
 double mean(const std::vector<double>& samples) {
   double sum = 0.0;
   for (double v : samples) sum += v;

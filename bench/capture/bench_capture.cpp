@@ -18,6 +18,7 @@
 #include "slamd/capture/depth_preprocessor.hpp"
 #include "slamd/capture/tum_source.hpp"
 #include "slamd/common/latency_histogram.hpp"
+#include "slamd/common/time.hpp"
 #include "slamd/comms/frame_codec.hpp"
 #include "slamd/comms/message_codec.hpp"
 #include "slamd/sources/create_frame_source.hpp"
@@ -35,14 +36,6 @@ std::filesystem::path tumFolder() {
 
 Config tumConfig() {
   return Config::fromFile(std::string(SLAMD_SOURCE_DIR) + "/config/tum_fr1.yaml");
-}
-
-// CPU time of this thread: on a shared, loaded machine it is the figure that does not depend on
-// what else runs (wall-clock percentiles are reported too).
-double threadCpuMs() {
-  timespec t{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
-  return static_cast<double>(t.tv_sec) * 1e3 + static_cast<double>(t.tv_nsec) * 1e-6;
 }
 
 // Per-frame wall and CPU times of one benchmark.

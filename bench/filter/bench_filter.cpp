@@ -12,6 +12,7 @@
 #include <benchmark/benchmark.h>
 
 #include "corridor_scene.hpp"
+#include "slamd/common/time.hpp"
 #include "slamd/filter/vanishing_point_filter.hpp"
 
 namespace {
@@ -46,13 +47,13 @@ class FrameTimes {
  public:
   void start() {
     wall_start_ = std::chrono::steady_clock::now();
-    cpu_start_ms_ = threadCpuMs();
+    cpu_start_ms_ = slamd::threadCpuMs();
   }
   void stop() {
     wall_ms_.push_back(
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - wall_start_)
             .count());
-    cpu_ms_.push_back(threadCpuMs() - cpu_start_ms_);
+    cpu_ms_.push_back(slamd::threadCpuMs() - cpu_start_ms_);
   }
   void report(benchmark::State& state) {
     add(state, "p50_ms", "p95_ms", wall_ms_);
@@ -60,11 +61,6 @@ class FrameTimes {
   }
 
  private:
-  static double threadCpuMs() {
-    timespec ts{};
-    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
-    return static_cast<double>(ts.tv_sec) * 1e3 + static_cast<double>(ts.tv_nsec) * 1e-6;
-  }
   static void add(benchmark::State& state, const char* p50, const char* p95,
                   std::vector<double>& ms) {
     if (ms.empty()) return;

@@ -37,12 +37,6 @@ using namespace slamd;
 
 namespace {
 
-double threadCpuMs() {
-  timespec ts{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
-  return static_cast<double>(ts.tv_sec) * 1e3 + static_cast<double>(ts.tv_nsec) * 1e-6;
-}
-
 struct OdometryRecord {
   Utime utime = 0;
   SE3 T_prev_curr = SE3::Identity();

@@ -18,6 +18,7 @@
 
 #include "slamd/common/config.hpp"
 #include "slamd/common/latency_histogram.hpp"
+#include "slamd/common/time.hpp"
 #include "slamd/synth/synthetic_source.hpp"
 
 namespace {
@@ -27,13 +28,6 @@ const char* const kScenes[] = {"corridor", "corridor_loop", "room"};
 std::unique_ptr<slamd::SyntheticSource> makeSource(const std::string& scene) {
   slamd::Config config;
   return std::make_unique<slamd::SyntheticSource>(scene, slamd::SyntheticConfig::load(config));
-}
-
-/// CPU time of this thread in milliseconds.
-double threadCpuMs() {
-  timespec now{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &now);
-  return static_cast<double>(now.tv_sec) * 1e3 + static_cast<double>(now.tv_nsec) * 1e-6;
 }
 
 void reportPercentiles(benchmark::State& state, const std::vector<double>& frame_ms) {
@@ -48,10 +42,10 @@ void BM_RenderExact(benchmark::State& state) {
   std::vector<double> frame_ms;
   int index = 0;
   for (auto _ : state) {
-    const double start_ms = threadCpuMs();
+    const double start_ms = slamd::threadCpuMs();
     source->renderExact(index, out);
     benchmark::DoNotOptimize(out.depth_m.data);
-    frame_ms.push_back(threadCpuMs() - start_ms);
+    frame_ms.push_back(slamd::threadCpuMs() - start_ms);
     index = (index + 7) % source->frameCount();
   }
   reportPercentiles(state, frame_ms);
@@ -64,10 +58,10 @@ void BM_SourceFrame(benchmark::State& state) {
   std::vector<double> frame_ms;
   int index = 0;
   for (auto _ : state) {
-    const double start_ms = threadCpuMs();
+    const double start_ms = slamd::threadCpuMs();
     auto frame = source->renderFrame(index);
     benchmark::DoNotOptimize(frame.get());
-    frame_ms.push_back(threadCpuMs() - start_ms);
+    frame_ms.push_back(slamd::threadCpuMs() - start_ms);
     index = (index + 7) % source->frameCount();
   }
   reportPercentiles(state, frame_ms);

@@ -17,26 +17,16 @@
 #include <opencv2/core.hpp>
 
 #include "slamd/capture/tum_source.hpp"
-#include "slamd/synth/synthetic_source.hpp"
 #include "slamd/common/log.hpp"
 #include "slamd/common/program_options.hpp"
 #include "slamd/common/time.hpp"
 #include "slamd/common/trajectory.hpp"
 #include "slamd/eval/metrics_report.hpp"
 #include "slamd/eval/trajectory_error.hpp"
+#include "slamd/synth/synthetic_source.hpp"
 #include "slamd/tracking/visual_odometry.hpp"
 
 using namespace slamd;
-
-namespace {
-
-double threadCpuMs() {
-  timespec ts{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
-  return static_cast<double>(ts.tv_sec) * 1e3 + static_cast<double>(ts.tv_nsec) * 1e-6;
-}
-
-}  // namespace
 
 int main(int argc, char** argv) {
   ProgramOptions options("slamd-odometry-run",

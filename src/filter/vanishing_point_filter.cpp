@@ -21,9 +21,8 @@ FilterOutput VanishingPointFilter::process(const FilterInput& input) {
           ekf_.updateVanishingPoint(out.vanishing_point->pixel, out.vanishing_point->pixel_covariance);
     }
   }
-  if (config_.enabled && config_.surface_axes &&
-      (input.surface_axes || !input.depth_m.empty())) {
-    out.surface_axes = input.surface_axes ? *input.surface_axes : axis_detector_.detect(input.depth_m);
+  if (config_.enabled && config_.surface_axes && !input.depth_m.empty()) {
+    out.surface_axes = axis_detector_.detect(input.depth_m);
     for (const SurfaceAxis& axis : out.surface_axes->axes) {
       out.axis_updates.push_back(ekf_.updateDirection(axis.direction_camera, axis.covariance));
     }

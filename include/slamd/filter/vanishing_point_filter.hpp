@@ -11,7 +11,6 @@
 // or, with the detection done elsewhere (e.g. on a thread running in parallel with tracking, with
 // its own VanishingPointDetector built from the same FilterConfig and intrinsics):
 //     in.detection = detector.detect(frame.gray);  // then in.gray is not needed and not used
-//     in.surface_axes = axis_detector.detect(frame.depth_m);  // likewise for in.depth_m
 //     FilterOutput out = filter.process(in);
 //     publish(out.pose);                              // T_world_camera + 6x6, source kFilter
 //     if (out.vanishing_point) publish(out.vanishing_point, out.update);  // vanishing_point_t
@@ -51,10 +50,6 @@ struct FilterInput {
   /// own (gray is ignored); when empty, process() detects on gray (if any). Either way it is
   /// used only with filter.enabled and filter.vanishing_points.
   std::optional<VanishingPoint> detection;
-  /// Precomputed plane axes of the current frame (SurfaceAxisDetector::detect on its depth, same
-  /// options and intrinsics): used as is instead of detecting on depth_m. Used only with
-  /// filter.enabled and filter.surface_axes.
-  std::optional<SurfaceAxes> surface_axes;
 };
 
 struct FilterOutput {
@@ -66,7 +61,7 @@ struct FilterOutput {
   /// Set when a vanishing point was found and handed to the EKF (only those supported by at least
   /// filter.min_update_lines lines are).
   std::optional<VpUpdateResult> update;
-  /// Set when a depth image or precomputed axes were given and surface axes are enabled.
+  /// Set when a depth image was given and surface axes are enabled.
   std::optional<SurfaceAxes> surface_axes;
   /// One result per axis handed to the EKF (in the order of surface_axes->axes).
   std::vector<VpUpdateResult> axis_updates;

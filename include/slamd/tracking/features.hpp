@@ -53,8 +53,8 @@ class FeatureExtractor {
 std::unique_ptr<FeatureExtractor> makeFeatureExtractor(const TrackingConfig& config);
 
 /// Undistorts keypoints (when configured and the intrinsics have plumb-bob coefficients), reads
-/// depth at each raw keypoint (CV_32F metres, NaN = none; nearest pixel, with a 3x3 consistency
-/// check) and back-projects the points.
+/// depth at each raw keypoint (CV_32F metres, NaN = none; depthAtPixel) and back-projects the
+/// points, and records the surface slope around each (inverseDepthGradient).
 void attachGeometry(const cv::Mat& depth_m, const CameraIntrinsics& intrinsics,
                     const TrackingConfig& config, FeatureSet& features);
 
