@@ -28,6 +28,7 @@ VanishingPointConfig VanishingPointConfig::load(Config& config, const std::strin
   c.min_line_length_px =
       config.getDouble(key("min_line_length_px"), c.min_line_length_px, 2.0, 2000.0);
   c.max_line_gap_px = config.getDouble(key("max_line_gap_px"), c.max_line_gap_px, 0.0, 100.0);
+  c.subpixel_lines = config.getBool(key("subpixel_lines"), c.subpixel_lines);
   c.max_segments = config.getInt(key("max_segments"), c.max_segments, 2, 5000);
   c.reject_axis_parallel = config.getBool(key("reject_axis_parallel"), c.reject_axis_parallel);
   c.axis_parallel_angle_deg =

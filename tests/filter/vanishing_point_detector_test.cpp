@@ -1,6 +1,7 @@
 #include "slamd/filter/vanishing_point_detector.hpp"
 
 #include <cmath>
+#include <cstdio>
 #include <random>
 
 #include <gtest/gtest.h>
@@ -66,6 +67,69 @@ TEST(VanishingPointDetector, FindsSyntheticCorridorPointWithin2PxWithHoughAtFull
 
 TEST(VanishingPointDetector, FindsSyntheticCorridorPointWithin2PxWithLsd) {
   expectCorridorWithin2Px("lsd");
+}
+
+/// A pinwheel of grey sectors meeting at vp_px, each pixel the average over an 8x8 grid inside
+/// it (a camera integrating over the pixel area), plus Gaussian noise: its edges are straight
+/// lines through vp_px at sub-pixel positions. Sector edges avoid the image axes by 10+ degrees.
+cv::Mat renderPinwheel(const CameraIntrinsics& K, const Eigen::Vector2d& vp_px, unsigned seed) {
+  const double edges_deg[] = {15.0, 40.0, 62.0, 118.0, 145.0, 165.0,
+                              197.0, 222.0, 250.0, 290.0, 318.0, 340.0};
+  const std::uint8_t shades[] = {60, 170, 90, 200, 70, 150, 100, 210, 80, 180, 110, 190};
+  constexpr int kSub = 8;
+  cv::Mat gray(K.height, K.width, CV_8UC1);
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> noise(0.0, 2.0);
+  for (int r = 0; r < K.height; ++r) {
+    for (int c = 0; c < K.width; ++c) {
+      double sum = 0.0;
+      for (int i = 0; i < kSub; ++i) {
+        for (int j = 0; j < kSub; ++j) {
+          const double x = c - 0.5 + (j + 0.5) / kSub - vp_px.x();
+          const double y = r - 0.5 + (i + 0.5) / kSub - vp_px.y();
+          double a = std::atan2(y, x) / kDeg;
+          if (a < 0.0) a += 360.0;
+          int sector = 0;
+          while (sector < 12 && a >= edges_deg[sector]) ++sector;
+          sum += shades[sector % 12];
+        }
+      }
+      gray.at<std::uint8_t>(r, c) =
+          cv::saturate_cast<std::uint8_t>(sum / (kSub * kSub) + noise(rng));
+    }
+  }
+  return gray;
+}
+
+// Canny edge pixels sit on the (half-resolution) pixel grid: lines through their centres put the
+// point a few tenths of a pixel off. The sub-pixel refit on the full-resolution grey image must
+// find it to a small fraction of a pixel.
+TEST(VanishingPointDetector, SubPixelLineRefitLocatesPointToATenthOfAPixel) {
+  const CameraIntrinsics K;
+  VanishingPointConfig refined_config;
+  VanishingPointConfig grid_config;
+  grid_config.subpixel_lines = false;
+  VanishingPointDetector refined(K, refined_config);
+  VanishingPointDetector grid(K, grid_config);
+  const Eigen::Vector2d points[] = {{341.37, 219.81}, {300.62, 262.29}, {318.05, 244.55}};
+  double worst_refined = 0.0, sum_sq_grid = 0.0, sum_sq_refined = 0.0;
+  unsigned seed = 7;
+  for (const auto& vp_px : points) {
+    const cv::Mat gray = renderPinwheel(K, vp_px, seed++);
+    const VanishingPoint a = refined.detect(gray);
+    const VanishingPoint b = grid.detect(gray);
+    ASSERT_EQ(a.status, VanishingPointStatus::kOk);
+    ASSERT_EQ(b.status, VanishingPointStatus::kOk);
+    const double error_refined = (a.pixel - vp_px).norm();
+    const double error_grid = (b.pixel - vp_px).norm();
+    std::printf("point (%.2f, %.2f): error %.3f px refined, %.3f px on the edge-pixel grid\n",
+                vp_px.x(), vp_px.y(), error_refined, error_grid);
+    worst_refined = std::max(worst_refined, error_refined);
+    sum_sq_refined += error_refined * error_refined;
+    sum_sq_grid += error_grid * error_grid;
+  }
+  EXPECT_LT(worst_refined, 0.1);
+  EXPECT_LT(sum_sq_refined, sum_sq_grid);
 }
 
 TEST(VanishingPointDetector, RecoversExactPointFromLinesWithOutliers) {

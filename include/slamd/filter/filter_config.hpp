@@ -40,6 +40,11 @@ struct VanishingPointConfig {
   double min_line_length_px = 30.0;
   /// `max_line_gap_px` (double, default 5, 0..100, pixels): gap bridged inside one Hough segment.
   double max_line_gap_px = 5.0;
+  /// `subpixel_lines` (bool, default true): refit every segment's line to sub-pixel edge
+  /// positions of the full-resolution grey image (grey-level differences across the line,
+  /// parabolic peak, contrast-weighted total least squares). Off, lines run through the centres of
+  /// reduced-resolution edge pixels, which biased the corridor's vanishing point by 0.3 px.
+  bool subpixel_lines = true;
   /// `max_segments` (int, default 150, 2..5000): only the longest segments are kept.
   int max_segments = 150;
   /// `reject_axis_parallel` (bool, default true): drop segments nearly parallel to the image axes

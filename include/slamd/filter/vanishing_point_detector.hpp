@@ -13,7 +13,8 @@
 // Steps: resize by image_scale (default 0.5, area averaging), optional Gaussian blur, Canny edges,
 // probabilistic Hough segments, each refit by least squares to the edge pixels within one pixel
 // of it (or OpenCV's LSD on the resized grey image), segments scaled back to full-resolution
-// pixels, optional removal of segments nearly parallel to the image axes (paper 002), then
+// pixels and (subpixel_lines) refitted to sub-pixel edge positions of the full-resolution image,
+// optional removal of segments nearly parallel to the image axes (paper 002), then
 // RANSAC over segment pairs: each pair's intersection is scored by the summed length of the
 // segments pointing at it (angle between the segment and the ray from its midpoint to the point
 // below `inlier_angle_deg`). The best candidate is refined by least squares on its inliers with
