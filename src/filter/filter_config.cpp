@@ -61,6 +61,9 @@ FilterConfig FilterConfig::load(Config& config) {
       "filter.fallback_translation_sigma_m", c.fallback_translation_sigma_m, 1e-6, 10.0);
   c.fallback_rotation_sigma_rad = config.getDouble("filter.fallback_rotation_sigma_rad",
                                                    c.fallback_rotation_sigma_rad, 1e-6, 3.0);
+  c.max_angular_rate_radps =
+      config.getDouble("filter.max_angular_rate_radps", c.max_angular_rate_radps, 0.01, 100.0);
+  c.max_speed_mps = config.getDouble("filter.max_speed_mps", c.max_speed_mps, 0.01, 100.0);
   c.gate_chi2 = config.getDouble("filter.gate_chi2", c.gate_chi2, 0.1, 1000.0);
   c.measurement_noise_scale = config.getDouble("filter.measurement_noise_scale",
                                                c.measurement_noise_scale, 0.01, 1e4);

@@ -193,6 +193,20 @@ Eigen::Vector3d PoseEkf::directionFromAxis(const Eigen::Matrix3d& R_world_camera
 
 // --- prediction --------------------------------------------------------------------------------
 
+bool PoseEkf::capAtMotionLimits(double dt_s, Matrix6d* Q_odometry) const {
+  const double max_translation_m = config_.max_speed_mps * dt_s;
+  const double max_rotation_rad = config_.max_angular_rate_radps * dt_s;
+  Vector6d scale = Vector6d::Ones();
+  for (int i = 0; i < 6; ++i) {
+    const double limit = i < 3 ? max_translation_m : max_rotation_rad;
+    const double variance = (*Q_odometry)(i, i);
+    if (variance > limit * limit) scale(i) = limit / std::sqrt(variance);
+  }
+  if ((scale.array() == 1.0).all()) return false;
+  *Q_odometry = scale.asDiagonal() * (*Q_odometry) * scale.asDiagonal();
+  return true;
+}
+
 EkfPredictStatus PoseEkf::predict(const SE3& T_prev_curr, const Matrix6d& covariance_prev_curr,
                                   double dt_s) {
   ++counters_.predictions;
@@ -222,6 +236,7 @@ EkfPredictStatus PoseEkf::predict(const SE3& T_prev_curr, const Matrix6d& covari
     ++counters_.bad_dt;
     dt_s = 0.0;
   }
+  if (dt_s > 0.0 && capAtMotionLimits(dt_s, &Q_odometry)) ++counters_.capped_covariances;
   dt_s = std::min(dt_s, config_.max_dt_s);
 
   Matrix6d F, G;

@@ -443,6 +443,40 @@ TEST(PoseEkf, BadInputIsRejectedWithStatusAndCounted) {
   EXPECT_TRUE(f.ekf.covariance().allFinite());
 }
 
+// A lost frame's increment comes with an "unknown" covariance (10 rad sigma). The camera cannot
+// have turned or moved faster than the configured limits, so the prediction grows by at most
+// (limit * dt)^2 per axis; ordinary increments pass unchanged.
+TEST(PoseEkf, LostFrameCovarianceIsCappedAtTheMotionLimits) {
+  FilterConfig config;
+  config.translation_noise_m_per_sqrt_s = 0.0;
+  config.rotation_noise_rad_per_sqrt_s = 0.0;
+  config.max_speed_mps = 3.0;
+  config.max_angular_rate_radps = 4.0;
+  const CameraIntrinsics K;
+  PoseEkf ekf(config, K);
+  ekf.reset(SE3::Identity(), Matrix6d::Zero());
+  constexpr double kDt = 1.0 / 30.0;
+
+  const Matrix6d ordinary = Matrix6d::Identity() * 1e-6;
+  EXPECT_EQ(ekf.predict(SE3::Identity(), ordinary, kDt), EkfPredictStatus::kOk);
+  EXPECT_EQ(ekf.counters().capped_covariances, 0);
+  const Matrix6d P_ordinary = ekf.covariance().topLeftCorner<6, 6>();
+  EXPECT_TRUE(P_ordinary.isApprox(ordinary, 1e-9));
+
+  ekf.reset(SE3::Identity(), Matrix6d::Zero());
+  Matrix6d lost = Matrix6d::Identity() * 1e2;
+  lost(3, 4) = lost(4, 3) = 50.0;  // correlation 0.5 between two rotation axes, kept
+  EXPECT_EQ(ekf.predict(SE3::Identity(), lost, kDt), EkfPredictStatus::kOk);
+  EXPECT_EQ(ekf.counters().capped_covariances, 1);
+  const Matrix6d P = ekf.covariance().topLeftCorner<6, 6>();
+  const double max_translation_m = 3.0 * kDt, max_rotation_rad = 4.0 * kDt;
+  for (int i = 0; i < 3; ++i) {
+    EXPECT_NEAR(P(i, i), max_translation_m * max_translation_m, 1e-12);
+    EXPECT_NEAR(P(i + 3, i + 3), max_rotation_rad * max_rotation_rad, 1e-12);
+  }
+  EXPECT_NEAR(P(3, 4) / std::sqrt(P(3, 3) * P(4, 4)), 0.5, 1e-9);
+}
+
 TEST(PoseEkf, CorrectionMovesPoseAndLandmarksTogether) {
   OneLandmarkFixture f;
   Eigen::Vector2d before;

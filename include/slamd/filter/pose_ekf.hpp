@@ -150,6 +150,8 @@ struct EkfCounters {
   std::int64_t predictions_rejected = 0;
   std::int64_t fallback_covariances = 0;
   std::int64_t bad_dt = 0;  ///< negative or non-finite dt (treated as 0)
+  /// odometry covariances capped at the motion limits (a lost frame's, for example)
+  std::int64_t capped_covariances = 0;
   std::int64_t updates_accepted = 0;
   std::int64_t updates_gated = 0;
   std::int64_t bad_measurements = 0;
@@ -258,6 +260,9 @@ class PoseEkf {
                                             Eigen::Matrix2d* J_pixel);
 
  private:
+  /// Scales rows and columns of an odometry covariance so no axis exceeds the motion limits over
+  /// dt_s (filter.max_speed_mps, filter.max_angular_rate_radps); true when it changed anything.
+  bool capAtMotionLimits(double dt_s, Matrix6d* Q_odometry) const;
   /// One measurement of a world direction, validated: a vanishing point (pixel) or a plane axis
   /// (axis_camera), with its noise R (pixels^2, or rad^2 in B(axis_camera)).
   struct Observation {
