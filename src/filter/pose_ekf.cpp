@@ -315,13 +315,15 @@ void PoseEkf::applyUpdate(const Eigen::MatrixXd& H, const Eigen::Vector2d& innov
   P_ = I_KH * P_ * I_KH.transpose() + K * R_px * K.transpose();
 
   // Inject the error into the nominal state, then move the covariance to the new linearisation
-  // point: e' = J_r(dtheta) e for the rotation, B(d')^T B(d) / |d + B dl| for each landmark.
+  // point: the rotation error is carried over unchanged in the world frame, which in body
+  // coordinates is e' = exp(dtheta)^T e (see the header: "Reset"); B(d')^T B(d) / |d + B dl| for
+  // each landmark.
   Eigen::MatrixXd reset = Eigen::MatrixXd::Identity(n, n);
   const Eigen::Vector3d dtheta = dx.segment<3>(3);
   T_world_camera_.translation() += dx.head<3>();
   T_world_camera_.linear() = T_world_camera_.linear() * expSO3(dtheta);
   T_world_camera_ = normalizedSE3(T_world_camera_);
-  reset.block<3, 3>(3, 3) = leftJacobianSO3(-dtheta);
+  reset.block<3, 3>(3, 3) = expSO3(dtheta).transpose();
   for (std::size_t i = 0; i < landmarks_.size(); ++i) {
     const Eigen::Index k = 6 + 2 * static_cast<Eigen::Index>(i);
     const Eigen::Vector3d d = landmarks_[i].d_world;
