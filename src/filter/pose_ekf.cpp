@@ -305,10 +305,19 @@ bool PoseEkf::innovation(std::size_t index, const Observation& observation,
 }
 
 void PoseEkf::applyUpdate(const Eigen::MatrixXd& H, const Eigen::Vector2d& innovation,
-                          const Eigen::Matrix2d& S, const Eigen::Matrix2d& R_px) {
+                          const Eigen::Matrix2d& S, const Eigen::Matrix2d& R_px,
+                          int only_landmark_index) {
   const Eigen::Index n = P_.rows();
   const Eigen::MatrixXd PHt = P_ * H.transpose();
-  const Eigen::MatrixXd K = PHt * S.inverse();
+  Eigen::MatrixXd K = PHt * S.inverse();
+  if (only_landmark_index >= 0) {
+    // Schmidt update: only the landmark's rows of the optimal gain are kept; the Joseph form below
+    // is the exact covariance for any gain, so the correlations with the unchanged rest stay right.
+    const Eigen::Index k = 6 + 2 * static_cast<Eigen::Index>(only_landmark_index);
+    const Eigen::MatrixXd landmark_rows = K.middleRows(k, 2);
+    K.setZero();
+    K.middleRows(k, 2) = landmark_rows;
+  }
   const Eigen::VectorXd dx = K * innovation;
   Eigen::MatrixXd I_KH = -K * H;
   I_KH.diagonal().array() += 1.0;
@@ -335,6 +344,14 @@ void PoseEkf::applyUpdate(const Eigen::MatrixXd& H, const Eigen::Vector2d& innov
   }
   P_ = reset * P_ * reset.transpose();
   symmetrize(P_);
+}
+
+void PoseEkf::refineOnProbation(std::size_t index, const Eigen::MatrixXd& H,
+                                const Observation& observation, VpUpdateResult* result) {
+  applyUpdate(H, result->innovation_px, result->innovation_covariance, observation.R,
+              static_cast<int>(index));
+  ++counters_.probation_tests;
+  result->status = VpUpdateStatus::kProbation;
 }
 
 void PoseEkf::acceptUpdate(std::size_t index, const Eigen::MatrixXd& H,
@@ -382,9 +399,9 @@ VpUpdateResult PoseEkf::updateLandmark(int landmark_id, const Eigen::Vector2d& p
     return result;
   }
   if (!landmarks_[index].active) {
-    ++counters_.probation_tests;
-    result.status = VpUpdateStatus::kProbation;
-    recordOutcome(index, result.nis);
+    const double nis = result.nis;
+    refineOnProbation(index, H, observation, &result);
+    recordOutcome(index, nis);
     return result;
   }
   const double nis = result.nis;
@@ -469,8 +486,7 @@ VpUpdateResult PoseEkf::updateObservation(const Observation& observation) {
       if (landmarks_[best_index].active) {
         acceptUpdate(best_index, best_H, observation, &result);
       } else {
-        ++counters_.probation_tests;
-        result.status = VpUpdateStatus::kProbation;
+        refineOnProbation(best_index, best_H, observation, &result);
       }
       recordOutcome(best_index, best.nis);
       return result;

@@ -347,7 +347,9 @@ TEST(PoseEkf, CreatesALandmarkOnlyFromConsistentDetections) {
             VpUpdateStatus::kAccepted);
 }
 
-TEST(PoseEkf, NewLandmarkUpdatesThePoseOnlyAfterAConsistentProbation) {
+TEST(PoseEkf, ProbationRefinesTheNewLandmarkAndMovesThePoseOnlyAfterIt) {
+  // The landmark is created from detections at (330, 230); its direction is really seen at
+  // (331.5, 231): the probation detections must pull the landmark there and leave the pose alone.
   const CameraIntrinsics K;
   FilterConfig config;
   config.landmark_init_frames = 3;
@@ -357,18 +359,35 @@ TEST(PoseEkf, NewLandmarkUpdatesThePoseOnlyAfterAConsistentProbation) {
   for (int i = 0; i < 3; ++i) ekf.updateVanishingPoint(Eigen::Vector2d(330.0, 230.0), R);
   ASSERT_EQ(ekf.landmarks().size(), 1u);
   EXPECT_FALSE(ekf.landmarks()[0].active);
+  const auto landmark_pixel = [&] {
+    const Eigen::Vector3d d_camera =
+        ekf.T_world_camera().linear().transpose() * ekf.landmarks()[0].d_world;
+    return K.project(d_camera);
+  };
+  const Eigen::Vector2d true_pixel(331.5, 231.0);
+  const double error_before_px = (landmark_pixel() - true_pixel).norm();
+  const double landmark_variance_before = ekf.covariance().block<2, 2>(6, 6).trace();
   const SE3 before = ekf.T_world_camera();
-  for (int i = 0; i < 5; ++i) {
-    const auto r = ekf.updateVanishingPoint(Eigen::Vector2d(330.2, 230.1), R);
+  const Eigen::Matrix<double, 6, 6> pose_covariance_before = ekf.covariance().block<6, 6>(0, 0);
+  for (int i = 0; i < 4; ++i) {
+    const auto r = ekf.updateVanishingPoint(true_pixel, R);
     EXPECT_EQ(r.status, VpUpdateStatus::kProbation);
     EXPECT_FALSE(r.accepted);
   }
-  EXPECT_TRUE(ekf.T_world_camera().isApprox(before));  // probation changes nothing
   ASSERT_EQ(ekf.landmarks().size(), 1u);
+  EXPECT_FALSE(ekf.landmarks()[0].active);
+  EXPECT_TRUE(ekf.T_world_camera().isApprox(before));  // probation never moves the pose
+  EXPECT_TRUE((ekf.covariance().block<6, 6>(0, 0).isApprox(pose_covariance_before)));
+  const double error_after_px = (landmark_pixel() - true_pixel).norm();
+  EXPECT_GT(error_before_px, 1.5);
+  EXPECT_LT(error_after_px, 0.4 * error_before_px);
+  const double landmark_variance_after = ekf.covariance().block<2, 2>(6, 6).trace();
+  EXPECT_LT(landmark_variance_after, 0.5 * landmark_variance_before);
+  // The fifth consistent detection ends the probation; the next one updates the pose.
+  EXPECT_EQ(ekf.updateVanishingPoint(true_pixel, R).status, VpUpdateStatus::kProbation);
   EXPECT_TRUE(ekf.landmarks()[0].active);
   EXPECT_EQ(ekf.counters().landmarks_activated, 1);
-  EXPECT_EQ(ekf.updateVanishingPoint(Eigen::Vector2d(330.2, 230.1), R).status,
-            VpUpdateStatus::kAccepted);
+  EXPECT_EQ(ekf.updateVanishingPoint(true_pixel, R).status, VpUpdateStatus::kAccepted);
 }
 
 TEST(PoseEkf, LandmarkWhoseDetectionsScatterIsRetiredWithoutTouchingThePose) {

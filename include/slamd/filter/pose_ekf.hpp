@@ -50,8 +50,11 @@
 // new landmark, initialised with the covariance of R * K^-1 u (correlated with the pose).
 // Landmark consistency (NIS statistics per landmark): a landmark created this way is on probation
 // for its first landmark_probation detections of its direction (within
-// landmark_min_separation_deg): they are gated as usual but change nothing (kProbation); if the
-// median of their NIS is at most landmark_consistency_chi2 it becomes active, otherwise it is
+// landmark_min_separation_deg): they are gated as usual and never move the pose (kProbation), but
+// those inside the gate refine the landmark's own direction (a Schmidt update: only its rows of
+// the gain are kept), so that the landmark does not keep the error of the one detection it was
+// created from (rendered corridor seed 42: a -0.77 px first detection left the pitch 0.06 deg off
+// for the whole walk); if the median of their NIS is at most landmark_consistency_chi2 it becomes active, otherwise it is
 // retired. An active landmark whose last landmark_window detections have a median NIS above
 // landmark_consistency_chi2 is retired too. Retiring removes the landmark from the state
 // (marginalisation: its rows and columns are dropped) and blocks its direction for new landmarks
@@ -114,7 +117,7 @@ enum class VpUpdateStatus : std::int8_t {
   kBadMeasurement,  ///< non-finite pixel, or covariance NaN / not positive definite
   kUnknownLandmark, ///< updateLandmark() with an id that does not exist
   kNotVisible,      ///< the landmark's vanishing point is at infinity in the image
-  kProbation,       ///< inside the gate of a landmark on probation: counted, state unchanged
+  kProbation,       ///< inside the gate of a landmark on probation: refines it, pose unchanged
 };
 
 /// What a measurement of a world direction is.
@@ -147,7 +150,7 @@ struct DirectionLandmark {
   int id = 0;
   Eigen::Vector3d d_world = Eigen::Vector3d::UnitZ();  ///< unit axis, world frame
   std::int64_t num_updates = 0;
-  bool active = true;  ///< false while on probation (tested, never applied)
+  bool active = true;  ///< false while on probation (tested, refined, never moves the pose)
   /// the kind of measurement it was created from (whose clock times its retirement)
   DirectionMeasurement kind = DirectionMeasurement::kVanishingPoint;
   /// NIS of the recent detections of its direction: the probation's, then a ring of the last
@@ -300,8 +303,14 @@ class PoseEkf {
   /// NIS and pieces for landmark index i; false when not visible.
   bool innovation(std::size_t index, const Observation& observation, VpUpdateResult* result,
                   Eigen::MatrixXd* H) const;
+  /// Kalman update with Joseph-form covariance. With only_landmark_index >= 0 only that
+  /// landmark's direction moves (Schmidt update): the pose and other landmarks are unchanged.
   void applyUpdate(const Eigen::MatrixXd& H, const Eigen::Vector2d& innovation,
-                   const Eigen::Matrix2d& S, const Eigen::Matrix2d& R_px);
+                   const Eigen::Matrix2d& S, const Eigen::Matrix2d& R_px,
+                   int only_landmark_index = -1);
+  /// A detection inside the gate of a landmark on probation refines that landmark's direction.
+  void refineOnProbation(std::size_t index, const Eigen::MatrixXd& H,
+                         const Observation& observation, VpUpdateResult* result);
   void acceptUpdate(std::size_t index, const Eigen::MatrixXd& H, const Observation& observation,
                     VpUpdateResult* result);
   int addLandmarkUnchecked(const Observation& observation, bool active);
