@@ -15,6 +15,7 @@
 #include <cstdio>
 #include <ctime>
 #include <fstream>
+#include <iomanip>
 #include <iostream>
 #include <memory>
 #include <sstream>
@@ -119,6 +120,32 @@ Eigen::Vector3d rmsPerAxis(const std::vector<Eigen::Vector3d>& errors) {
                         : Eigen::Vector3d((sum_sq / static_cast<double>(errors.size())).cwiseSqrt());
 }
 
+/// Per-frame rotation errors (as rotationErrorsDeg, one line per estimated pose with ground truth)
+/// and the true vanishing point of the world x axis (the corridor's), for diagnosis.
+void writeRotationErrors(const std::string& path, const Trajectory& gt, const Trajectory& est,
+                         const std::vector<Eigen::Vector3d>& rot_odometry_deg,
+                         const std::vector<Eigen::Vector3d>& rot_filter_deg,
+                         const CameraIntrinsics& intrinsics) {
+  std::ofstream out(path);
+  out << "# t_s odometry_x odometry_y odometry_z filter_x filter_y filter_z (deg, about world "
+         "axes) true_vp_x_px true_vp_y_px (world x axis)\n";
+  std::size_t k = 0;
+  for (const StampedPose& p : est) {
+    if (k >= rot_odometry_deg.size() || k >= rot_filter_deg.size()) break;
+    const auto it = std::lower_bound(gt.begin(), gt.end(), p.timestamp_s - 0.02,
+                                     [](const StampedPose& g, double s) { return g.timestamp_s < s; });
+    if (it == gt.end() || std::abs(it->timestamp_s - p.timestamp_s) >= 0.02) continue;
+    const Eigen::Vector3d d_camera = it->T_world_camera.linear().transpose() * Eigen::Vector3d::UnitX();
+    const double u = intrinsics.fx * d_camera.x() / d_camera.z() + intrinsics.cx;
+    const double v = intrinsics.fy * d_camera.y() / d_camera.z() + intrinsics.cy;
+    out << std::fixed << std::setprecision(6) << p.timestamp_s << std::setprecision(4);
+    for (int i = 0; i < 3; ++i) out << ' ' << rot_odometry_deg[k][i];
+    for (int i = 0; i < 3; ++i) out << ' ' << rot_filter_deg[k][i];
+    out << std::setprecision(2) << ' ' << u << ' ' << v << '\n';
+    ++k;
+  }
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -130,6 +157,9 @@ int main(int argc, char** argv) {
   options.addOption("trajectory", "FILE", "write the filtered trajectory (TUM format)");
   options.addOption("odometry-trajectory", "FILE", "write the odometry-only trajectory");
   options.addOption("vp-log", "FILE", "one line per frame: status, pixel, update, NIS");
+  options.addOption("rotation-errors", "FILE",
+                    "one line per frame with ground truth: time, odometry and filter rotation "
+                    "error about world x y z (deg), the true vanishing point of world x (px)");
   if (!options.parse(argc, argv)) return options.exitCode();
   cv::setNumThreads(1);
 
@@ -173,6 +203,7 @@ int main(int argc, char** argv) {
   int axes_seen = 0, axes_accepted = 0, axes_gated = 0;
   std::vector<double> axis_nis_compared;
   Utime last_utime = 0;
+  CameraIntrinsics frame_intrinsics;
   while (true) {
     FrameRead read = source->next(std::chrono::milliseconds(1000));
     if (read.status == FrameRead::Status::kEndOfStream) break;
@@ -187,7 +218,10 @@ int main(int argc, char** argv) {
       r = {o.utime, o.T_prev_curr, o.covariance};
       computed.push_back(r);
     }
-    if (!filter) filter = std::make_unique<VanishingPointFilter>(filter_config, frame.intrinsics);
+    if (!filter) {
+      filter = std::make_unique<VanishingPointFilter>(filter_config, frame.intrinsics);
+      frame_intrinsics = frame.intrinsics;
+    }
     FilterInput in;
     in.utime = r.utime;
     in.T_prev_curr = last_utime > 0 ? r.T_prev_curr : SE3::Identity();
@@ -282,6 +316,10 @@ int main(int argc, char** argv) {
     const Eigen::Vector3d end_odo = rot_odo.empty() ? nan3 : rot_odo.back();
     const Eigen::Vector3d end_filter = rot_filter.empty() ? nan3 : rot_filter.back();
     const Eigen::Vector3d rms_odo = rmsPerAxis(rot_odo), rms_filter = rmsPerAxis(rot_filter);
+    if (options.has("rotation-errors")) {
+      writeRotationErrors(options.value("rotation-errors"), *gt, filtered, rot_odo, rot_filter,
+                          frame_intrinsics);
+    }
     std::printf("ATE odometry %.4f m, filter %.4f m (%.3fx)\n", ate_odo, ate_filter,
                 ate_filter / ate_odo);
     std::printf("end rotation error about world x y z (deg): odometry %.3f %.3f %.3f, filter "

@@ -109,6 +109,23 @@ TEST(SyntheticSource, MotionBlurAndExposureChangeTheColourOnly) {
   EXPECT_GT(cv::norm(a->color_bgr, b->color_bgr, cv::NORM_L1) / a->color_bgr.total(), 1.0);
 }
 
+TEST(SyntheticSource, MotionBlurIsCentredOnTheFrameTimestamp) {
+  // An exposure of two frame periods spans frames 29..31 when centred on frame 30's timestamp, so
+  // the blurred frame is as far from frame 29's sharp render as from frame 31's. An exposure that
+  // ended at the timestamp (frames 28..30) would sit much closer to frame 29.
+  const auto sharp = test::makeSyntheticSource("corridor", {"synthetic.sensor.color_noise_std=0"});
+  const auto blurred = test::makeSyntheticSource(
+      "corridor", {"synthetic.sensor.color_noise_std=0", "synthetic.sensor.motion_blur=true",
+                   "synthetic.sensor.exposure_time_s=0.0666667", "synthetic.sensor.blur_samples=9"});
+  const RgbdFramePtr before = sharp->renderFrame(29);
+  const RgbdFramePtr after = sharp->renderFrame(31);
+  const RgbdFramePtr frame = blurred->renderFrame(30);
+  const double to_before = cv::norm(frame->color_bgr, before->color_bgr, cv::NORM_L1);
+  const double to_after = cv::norm(frame->color_bgr, after->color_bgr, cv::NORM_L1);
+  EXPECT_GT(to_before, 0.0);
+  EXPECT_NEAR(to_before / to_after, 1.0, 0.15) << to_before << " vs " << to_after;
+}
+
 TEST(SyntheticSource, ABlackoutCoversExactlyTheFramesInItsInterval) {
   // At 30 Hz, [1.0 s, 1.5 s) covers frames 30 to 44.
   const auto source = test::makeSyntheticSource(

@@ -23,7 +23,8 @@
 //  5. Range gate: no depth below min_range_m (about 0.5 m) or beyond max_range_m (about 4.5 m;
 //     Khoshelham & Oude Elberink 2012 recommend 1-3 m for mapping, the device reports 0.5-4.5 m).
 // Colour: a per-frame exposure gain (auto-exposure changes) and Gaussian noise per channel.
-// Motion blur is done by the synthetic source (averaging renders over the exposure time).
+// Motion blur is done by the synthetic source (averaging renders over the exposure time, centred
+// on the frame's timestamp).
 //
 // Noise is drawn from a stream derived from (seed, frame index): the same frame always gets the
 // same noise, whatever order frames are rendered in.
@@ -54,8 +55,8 @@ struct SensorParams {
   double color_noise_std = 2.0;    ///< grey levels (0..255), 0 disables
   double exposure_variation = 0.0; ///< peak relative gain change, 0 disables (e.g. 0.15)
   bool motion_blur = false;        ///< average renders over the exposure time
-  double exposure_time_s = 0.012;  ///< shutter time for the motion blur
-  int blur_samples = 4;            ///< renders averaged per blurred frame
+  double exposure_time_s = 0.012;  ///< shutter time for the motion blur, centred on the timestamp
+  int blur_samples = 5;            ///< renders averaged per blurred frame (odd: one is the frame's)
 
   /// Every effect off: depth and colour are the exact render.
   static SensorParams exact();
