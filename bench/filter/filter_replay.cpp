@@ -297,9 +297,11 @@ int main(int argc, char** argv) {
   double nis_acc_mean = 0.0;
   for (double v : nis_accepted) nis_acc_mean += v;
   if (!nis_accepted.empty()) nis_acc_mean /= static_cast<double>(nis_accepted.size());
-  std::printf("%d frames: %d vanishing points, %d accepted, %d gated, %zu landmarks; mean NIS %.2f "
-              "over %zu compared (accepted only %.2f); filter CPU median %.2f ms p95 %.2f ms\n",
+  std::printf("%d frames: %d vanishing points, %d accepted, %d gated, %zu landmarks, %lld "
+              "re-anchors; mean NIS %.2f over %zu compared (accepted only %.2f); filter CPU median "
+              "%.2f ms p95 %.2f ms\n",
               frames, detected, accepted, gated, filter ? filter->ekf().landmarks().size() : 0u,
+              filter ? static_cast<long long>(filter->ekf().counters().reanchors) : 0LL,
               nis_mean, nis_compared.size(), nis_acc_mean, percentile(cpu_ms, 50),
               percentile(cpu_ms, 95));
   double axis_nis_mean = 0.0;

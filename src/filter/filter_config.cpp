@@ -80,6 +80,10 @@ FilterConfig FilterConfig::load(Config& config) {
                                                  c.landmark_consistency_chi2, 0.1, 1000.0);
   c.landmark_retry_calls =
       config.getInt("filter.landmark_retry_calls", c.landmark_retry_calls, 0, 1000000);
+  c.reanchor_detections =
+      config.getInt("filter.reanchor_detections", c.reanchor_detections, 0, 1000);
+  c.reanchor_min_updates =
+      config.getInt("filter.reanchor_min_updates", c.reanchor_min_updates, 1, 1000000);
   c.min_update_lines = config.getInt("filter.min_update_lines", c.min_update_lines, 2, 1000);
   c.max_landmarks = config.getInt("filter.max_landmarks", c.max_landmarks, 0, 32);
   c.axes = SurfaceAxesConfig::load(config);

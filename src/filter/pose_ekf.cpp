@@ -358,10 +358,55 @@ void PoseEkf::acceptUpdate(std::size_t index, const Eigen::MatrixXd& H,
                            const Observation& observation, VpUpdateResult* result) {
   applyUpdate(H, result->innovation_px, result->innovation_covariance, observation.R);
   ++landmarks_[index].num_updates;
+  if (observation.kind == DirectionMeasurement::kVanishingPoint) {
+    landmarks_[index].gated_innovations_px.clear();
+    landmarks_[index].gated_innovation_covariances.clear();
+  }
   ++counters_.updates_accepted;
   if (observation.kind == DirectionMeasurement::kSurfaceAxis) ++counters_.axis_updates_accepted;
   result->status = VpUpdateStatus::kAccepted;
   result->accepted = true;
+}
+
+bool PoseEkf::reanchorAfterGating(std::size_t index, const Observation& observation,
+                                  VpUpdateResult* result) {
+  DirectionLandmark& landmark = landmarks_[index];
+  const auto needed = static_cast<std::size_t>(config_.reanchor_detections);
+  if (needed == 0 || !landmark.active || landmark.num_updates < config_.reanchor_min_updates) {
+    return false;
+  }
+  landmark.gated_innovations_px.push_back(result->innovation_px);
+  landmark.gated_innovation_covariances.push_back(result->innovation_covariance);
+  if (landmark.gated_innovations_px.size() > needed) {
+    landmark.gated_innovations_px.erase(landmark.gated_innovations_px.begin());
+    landmark.gated_innovation_covariances.erase(landmark.gated_innovation_covariances.begin());
+  }
+  if (landmark.gated_innovations_px.size() < needed) return false;
+  Eigen::Vector2d mean = Eigen::Vector2d::Zero();
+  for (const Eigen::Vector2d& nu : landmark.gated_innovations_px) mean += nu;
+  mean /= static_cast<double>(needed);
+  for (std::size_t i = 0; i < needed; ++i) {
+    const Eigen::Vector2d spread = landmark.gated_innovations_px[i] - mean;
+    if (spread.dot(landmark.gated_innovation_covariances[i].ldlt().solve(spread)) >
+        config_.gate_chi2) {
+      return false;  // the gated detections disagree: bad detections, not a pose jump
+    }
+  }
+  // Widen the rotation covariance perpendicular to the direction (camera frame) by the jump.
+  Eigen::Vector3d d_camera = T_world_camera_.linear().transpose() * landmark.d_world;
+  d_camera.normalize();
+  const double focal_px = 0.5 * (intrinsics_.fx + intrinsics_.fy);
+  const double sigma_rad = 2.0 * mean.norm() / focal_px;
+  P_.block<3, 3>(3, 3) +=
+      sigma_rad * sigma_rad * (Eigen::Matrix3d::Identity() - d_camera * d_camera.transpose());
+  symmetrize(P_);
+  VpUpdateResult widened = *result;
+  Eigen::MatrixXd H;
+  if (!innovation(index, observation, &widened, &H)) return false;
+  *result = widened;
+  acceptUpdate(index, H, observation, result);
+  ++counters_.reanchors;
+  return true;
 }
 
 std::int64_t PoseEkf::clock(DirectionMeasurement kind) const {
@@ -491,14 +536,18 @@ VpUpdateResult PoseEkf::updateObservation(const Observation& observation) {
       recordOutcome(best_index, best.nis);
       return result;
     }
+    // Only a detection of this landmark's direction tells about its consistency; one far from it
+    // is another direction.
+    const bool same_direction =
+        std::abs(landmarks_[best_index].d_world.dot(d_world)) > separation_cos;
+    if (same_direction && !axis && reanchorAfterGating(best_index, observation, &result)) {
+      recordOutcome(best_index, result.nis);
+      return result;
+    }
     ++counters_.updates_gated;
     if (axis) ++counters_.axis_updates_gated;
     result.status = VpUpdateStatus::kGated;
-    // Only a detection of this landmark's direction tells about its consistency; one far from it
-    // is another direction.
-    if (std::abs(landmarks_[best_index].d_world.dot(d_world)) > separation_cos) {
-      recordOutcome(best_index, best.nis);
-    }
+    if (same_direction) recordOutcome(best_index, best.nis);
   }
 
   // Not explained by any landmark: a candidate for a new one, when it is far from every known

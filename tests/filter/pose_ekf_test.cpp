@@ -561,6 +561,74 @@ TEST(PoseEkf, LostFramesDoNotRollTheCameraAboutTheVanishingDirection) {
   EXPECT_LT(roll_change_deg, 0.05);
 }
 
+/// A camera panning across a corridor (+z world) for 250 frames with exact odometry and a tiny
+/// covariance, except that at frame 150 one increment turns 0.5 degrees too far about the camera's
+/// x axis (pitch, observable from the corridor's point) with the same over-confident covariance.
+/// `scatter_px` adds an alternating offset to every detection after the jump. Returns the final
+/// rotation error (degrees) perpendicular to the corridor (the part a vanishing point observes;
+/// the camera is turned 10 degrees, so a sixth of the jump is about the corridor itself) and
+/// fills the counters.
+double rotationErrorAfterOdometryJump(int reanchor_detections, double scatter_px,
+                                      EkfCounters* counters) {
+  const CameraIntrinsics K;
+  FilterConfig config;
+  config.landmark_probation = 0;
+  config.reanchor_detections = reanchor_detections;
+  PoseEkf ekf(config, K);
+  constexpr double kDt = 1.0 / 30.0;
+  SE3 T_world_true = SE3::Identity();
+  T_world_true.linear() = expSO3(Eigen::Vector3d(0.0, -10.0 * M_PI / 180.0, 0.0));
+  ekf.reset(T_world_true, Matrix6d::Zero());
+  std::mt19937 rng(11);
+  std::normal_distribution<double> pixel_noise(0.0, 0.2);
+  const Eigen::Vector3d corridor_world = Eigen::Vector3d::UnitZ();
+  const Matrix6d tight = Matrix6d::Identity() * 1e-10;
+  for (int frame = 0; frame < 250; ++frame) {
+    SE3 step_true = SE3::Identity();
+    step_true.linear() =
+        expSO3(Eigen::Vector3d(0.0, 0.1 * std::sin(frame * 0.05) * M_PI / 180.0, 0.0));
+    step_true.translation() = Eigen::Vector3d(0.0, 0.0, 0.03);
+    T_world_true = T_world_true * step_true;
+    SE3 step_measured = step_true;
+    if (frame == 150) {
+      step_measured.linear() = step_true.linear() * expSO3(Eigen::Vector3d(0.5 * M_PI / 180.0, 0, 0));
+    }
+    ekf.predict(step_measured, tight, kDt);
+    Eigen::Vector2d vp = K.project(T_world_true.linear().transpose() * corridor_world) +
+                         Eigen::Vector2d(pixel_noise(rng), pixel_noise(rng));
+    if (frame > 150) vp.y() += (frame % 2 == 0 ? 1.0 : -1.0) * scatter_px;
+    ekf.updateVanishingPoint(vp, 0.04 * Eigen::Matrix2d::Identity());
+  }
+  *counters = ekf.counters();
+  const Eigen::Vector3d error_world =
+      logSO3(ekf.T_world_camera().linear() * T_world_true.linear().transpose());
+  return (error_world - error_world.dot(corridor_world) * corridor_world).norm() * 180.0 / M_PI;
+}
+
+TEST(PoseEkf, ReanchorsToAnEstablishedLandmarkAfterAnOdometryJump) {
+  EkfCounters with, without;
+  const double error_with_deg = rotationErrorAfterOdometryJump(5, 0.0, &with);
+  const double error_without_deg = rotationErrorAfterOdometryJump(0, 0.0, &without);
+  RecordProperty("error_with_deg", std::to_string(error_with_deg));
+  RecordProperty("error_without_deg", std::to_string(error_without_deg));
+  EXPECT_EQ(with.reanchors, 1);
+  EXPECT_EQ(with.landmarks_retired, 0);
+  EXPECT_LT(error_with_deg, 0.05);
+  // Without it the landmark is gated until retired and the jump stays in the pose.
+  EXPECT_EQ(without.reanchors, 0);
+  EXPECT_GE(without.landmarks_retired, 1);
+  EXPECT_GT(error_without_deg, 0.3);
+}
+
+TEST(PoseEkf, GatedDetectionsThatDisagreeDoNotReanchor) {
+  // After the jump the detections alternate 40 px above and below the truth: all gated, and far
+  // from each other, so they are bad detections, not a pose jump. Nothing may move the pose.
+  EkfCounters counters;
+  rotationErrorAfterOdometryJump(5, 40.0, &counters);
+  EXPECT_EQ(counters.reanchors, 0);
+  EXPECT_GE(counters.updates_gated, 5);
+}
+
 TEST(PoseEkf, CorrectionMovesPoseAndLandmarksTogether) {
   OneLandmarkFixture f;
   Eigen::Vector2d before;

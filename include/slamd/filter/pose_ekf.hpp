@@ -64,6 +64,15 @@
 // of them pulls the pose towards its own error. Such landmarks are gated most of the time (fr1/xyz:
 // 96% of comparisons), a corridor's rarely (4%), so these statistics tell them apart before they
 // do harm.
+// Re-anchoring (filter.reanchor_detections): an odometry increment that jumps (a wrong match set,
+// a bridged failure) with an over-confident covariance moves the pose away from an established
+// landmark, and every later detection is gated although they all agree with each other. When the
+// last reanchor_detections detections of a landmark with at least reanchor_min_updates accepted
+// updates are gated and each innovation lies within gate_chi2 of their mean (under its own S), the
+// rotation covariance perpendicular to the direction, in the camera frame, is widened by
+// sigma = 2 * |mean innovation| / f (radians), and the detection is applied: the pose returns to
+// the landmark instead of the landmark being retired and replaced by one at the wrong pose. The
+// rotation about the direction itself, which no vanishing point observes, is not widened.
 // Covariance updates use the Joseph form (I - KH) P (I - KH)^T + K R K^T.
 // Reset: after an update moves the rotation by dtheta (R' = R exp(dtheta)), the rotation block of
 // the covariance is re-expressed at R' with e' = exp(dtheta)^T e: the error is kept unchanged in
@@ -157,6 +166,10 @@ struct DirectionLandmark {
   /// landmark_window (consistency statistics).
   std::vector<double> recent_nis;
   std::size_t recent_next = 0;
+  /// Innovations (pixels) and their covariances S of the consecutive gated vanishing points of its
+  /// direction since its last accepted one (re-anchoring, filter.reanchor_detections).
+  std::vector<Eigen::Vector2d> gated_innovations_px;
+  std::vector<Eigen::Matrix2d> gated_innovation_covariances;
 };
 
 struct EkfCounters {
@@ -173,6 +186,9 @@ struct EkfCounters {
   std::int64_t landmarks_activated = 0;  ///< passed probation
   std::int64_t landmarks_retired = 0;    ///< failed probation or gated too often
   std::int64_t probation_tests = 0;
+  /// pose re-anchored to an established landmark after consistent gated detections (an odometry
+  /// jump; see filter.reanchor_detections)
+  std::int64_t reanchors = 0;
   std::int64_t axis_updates_accepted = 0;  ///< of updates_accepted: from plane axes
   std::int64_t axis_updates_gated = 0;     ///< of updates_gated: from plane axes
 };
@@ -313,6 +329,11 @@ class PoseEkf {
                          const Observation& observation, VpUpdateResult* result);
   void acceptUpdate(std::size_t index, const Eigen::MatrixXd& H, const Observation& observation,
                     VpUpdateResult* result);
+  /// Records a gated vanishing point of landmark index's direction; when the last
+  /// reanchor_detections of them agree, widens the rotation covariance and applies this one.
+  /// True when it did (result updated, status kAccepted).
+  bool reanchorAfterGating(std::size_t index, const Observation& observation,
+                           VpUpdateResult* result);
   int addLandmarkUnchecked(const Observation& observation, bool active);
   /// Records the NIS of a detection of landmark index's direction for its consistency statistics;
   /// may activate or retire it. Returns false when the landmark was retired (indices shift).
