@@ -257,6 +257,7 @@ EkfPredictStatus PoseEkf::predict(const SE3& T_prev_curr, const Matrix6d& covari
   }
   symmetrize(P_);
   T_world_camera_ = normalizedSE3(T_world_camera_ * T_prev_curr);
+  last_increment_noise_ = Q;
   return status;
 }
 
@@ -392,13 +393,25 @@ bool PoseEkf::reanchorAfterGating(std::size_t index, const Observation& observat
       return false;  // the gated detections disagree: bad detections, not a pose jump
     }
   }
-  // Widen the rotation covariance perpendicular to the direction (camera frame) by the jump.
+  // Widen the pose covariance by the jump, with the shape of an odometry increment's noise (the
+  // latest one's): a wrong increment turns the camera and moves it together (a rotation about the
+  // scene rather than about the camera), so the translation is corrected along with the rotation.
+  // The rotation about the direction itself, unobservable, is left alone.
   Eigen::Vector3d d_camera = T_world_camera_.linear().transpose() * landmark.d_world;
   d_camera.normalize();
+  Matrix6d keep_observable = Matrix6d::Identity();
+  keep_observable.block<3, 3>(3, 3) -= d_camera * d_camera.transpose();
+  Matrix6d shape = keep_observable * last_increment_noise_ * keep_observable.transpose();
   const double focal_px = 0.5 * (intrinsics_.fx + intrinsics_.fy);
   const double sigma_rad = 2.0 * mean.norm() / focal_px;
-  P_.block<3, 3>(3, 3) +=
-      sigma_rad * sigma_rad * (Eigen::Matrix3d::Identity() - d_camera * d_camera.transpose());
+  const double rotation_variance = 0.5 * shape.block<3, 3>(3, 3).trace();
+  if (!(rotation_variance > 1e-18) || !shape.allFinite()) {
+    shape.setZero();  // no usable increment noise: widen the rotation alone
+    shape.block<3, 3>(3, 3) = keep_observable.block<3, 3>(3, 3);
+  } else {
+    shape /= rotation_variance;
+  }
+  P_.topLeftCorner<6, 6>() += sigma_rad * sigma_rad * shape;
   symmetrize(P_);
   VpUpdateResult widened = *result;
   Eigen::MatrixXd H;
