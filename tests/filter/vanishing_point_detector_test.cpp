@@ -226,6 +226,8 @@ TEST(VanishingPointConfig, LoadsDefaultsAndRejectsBadValues) {
   EXPECT_TRUE(defaults.enabled);
   EXPECT_DOUBLE_EQ(defaults.gate_chi2, 5.99);
   EXPECT_EQ(defaults.vp.segment_detector, "hough");
+  EXPECT_EQ(defaults.reanchor_detections, 5);
+  EXPECT_EQ(defaults.reanchor_min_updates, 100);
 
   Config custom = Config::fromYamlString(
       "filter:\n  gate_chi2: 9.21\n  vp:\n    segment_detector: lsd\n    ransac_iterations: 50\n");
@@ -237,6 +239,9 @@ TEST(VanishingPointConfig, LoadsDefaultsAndRejectsBadValues) {
   Config bad_range;
   bad_range.set("filter.gate_chi2", "-1");
   EXPECT_THROW(FilterConfig::load(bad_range), ConfigError);
+  Config bad_reanchor;
+  bad_reanchor.set("filter.reanchor_detections", "-1");
+  EXPECT_THROW(FilterConfig::load(bad_reanchor), ConfigError);
   Config bad_type;
   bad_type.set("filter.vp.hough_threshold", "many");
   EXPECT_THROW(FilterConfig::load(bad_type), ConfigError);
