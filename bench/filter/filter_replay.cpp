@@ -83,22 +83,25 @@ double percentile(std::vector<double> v, double p) {
   return v[static_cast<std::size_t>(std::min<double>(v.size() - 1, p / 100.0 * v.size()))];
 }
 
+/// The ground-truth pose nearest to t_s, or nullptr when none is within 20 ms.
+const StampedPose* nearestGroundTruth(const Trajectory& gt, double t_s) {
+  const auto it = std::lower_bound(gt.begin(), gt.end(), t_s, [](const StampedPose& p, double s) {
+    return p.timestamp_s < s;
+  });
+  const StampedPose* best = nullptr;
+  if (it != gt.end()) best = &*it;
+  if (it != gt.begin() && (!best || t_s - std::prev(it)->timestamp_s < best->timestamp_s - t_s)) {
+    best = &*std::prev(it);
+  }
+  return best && std::abs(best->timestamp_s - t_s) < 0.02 ? best : nullptr;
+}
+
 /// Rotation error of every estimated pose that has ground truth within 20 ms (ground truth vs
 /// estimate, the estimate expressed in the ground truth's world through the first pose), about the
 /// world axes, degrees, in time order.
 std::vector<Eigen::Vector3d> rotationErrorsDeg(const Trajectory& gt, const Trajectory& est) {
   std::vector<Eigen::Vector3d> errors;
-  const auto nearest = [&](double t) -> const StampedPose* {
-    const auto it = std::lower_bound(gt.begin(), gt.end(), t, [](const StampedPose& p, double s) {
-      return p.timestamp_s < s;
-    });
-    const StampedPose* best = nullptr;
-    if (it != gt.end()) best = &*it;
-    if (it != gt.begin() && (!best || t - std::prev(it)->timestamp_s < best->timestamp_s - t)) {
-      best = &*std::prev(it);
-    }
-    return best && std::abs(best->timestamp_s - t) < 0.02 ? best : nullptr;
-  };
+  const auto nearest = [&](double t_s) { return nearestGroundTruth(gt, t_s); };
   if (est.empty()) return errors;
   const StampedPose* g0 = nearest(est.front().timestamp_s);
   if (!g0) return errors;
@@ -120,8 +123,9 @@ Eigen::Vector3d rmsPerAxis(const std::vector<Eigen::Vector3d>& errors) {
                         : Eigen::Vector3d((sum_sq / static_cast<double>(errors.size())).cwiseSqrt());
 }
 
-/// Per-frame rotation errors (as rotationErrorsDeg, one line per estimated pose with ground truth)
-/// and the true vanishing point of the world x axis (the corridor's), for diagnosis.
+/// Per-frame rotation errors (rotationErrorsDeg of odometry and filter over the same timestamps,
+/// so the k-th error of each belongs to the k-th pose with ground truth) and the true vanishing
+/// point of the world x axis (the corridor's), for diagnosis.
 void writeRotationErrors(const std::string& path, const Trajectory& gt, const Trajectory& est,
                          const std::vector<Eigen::Vector3d>& rot_odometry_deg,
                          const std::vector<Eigen::Vector3d>& rot_filter_deg,
@@ -132,16 +136,14 @@ void writeRotationErrors(const std::string& path, const Trajectory& gt, const Tr
   std::size_t k = 0;
   for (const StampedPose& p : est) {
     if (k >= rot_odometry_deg.size() || k >= rot_filter_deg.size()) break;
-    const auto it = std::lower_bound(gt.begin(), gt.end(), p.timestamp_s - 0.02,
-                                     [](const StampedPose& g, double s) { return g.timestamp_s < s; });
-    if (it == gt.end() || std::abs(it->timestamp_s - p.timestamp_s) >= 0.02) continue;
-    const Eigen::Vector3d d_camera = it->T_world_camera.linear().transpose() * Eigen::Vector3d::UnitX();
-    const double u = intrinsics.fx * d_camera.x() / d_camera.z() + intrinsics.cx;
-    const double v = intrinsics.fy * d_camera.y() / d_camera.z() + intrinsics.cy;
+    const StampedPose* truth = nearestGroundTruth(gt, p.timestamp_s);
+    if (!truth) continue;
+    const Eigen::Vector2d vp =
+        intrinsics.project(truth->T_world_camera.linear().transpose() * Eigen::Vector3d::UnitX());
     out << std::fixed << std::setprecision(6) << p.timestamp_s << std::setprecision(4);
     for (int i = 0; i < 3; ++i) out << ' ' << rot_odometry_deg[k][i];
     for (int i = 0; i < 3; ++i) out << ' ' << rot_filter_deg[k][i];
-    out << std::setprecision(2) << ' ' << u << ' ' << v << '\n';
+    out << std::setprecision(2) << ' ' << vp.x() << ' ' << vp.y() << '\n';
     ++k;
   }
 }

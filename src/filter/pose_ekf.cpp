@@ -359,10 +359,7 @@ void PoseEkf::acceptUpdate(std::size_t index, const Eigen::MatrixXd& H,
                            const Observation& observation, VpUpdateResult* result) {
   applyUpdate(H, result->innovation_px, result->innovation_covariance, observation.R);
   ++landmarks_[index].num_updates;
-  if (observation.kind == DirectionMeasurement::kVanishingPoint) {
-    landmarks_[index].gated_innovations_px.clear();
-    landmarks_[index].gated_innovation_covariances.clear();
-  }
+  if (observation.kind == DirectionMeasurement::kVanishingPoint) landmarks_[index].gated_run.clear();
   ++counters_.updates_accepted;
   if (observation.kind == DirectionMeasurement::kSurfaceAxis) ++counters_.axis_updates_accepted;
   result->status = VpUpdateStatus::kAccepted;
@@ -376,20 +373,16 @@ bool PoseEkf::reanchorAfterGating(std::size_t index, const Observation& observat
   if (needed == 0 || !landmark.active || landmark.num_updates < config_.reanchor_min_updates) {
     return false;
   }
-  landmark.gated_innovations_px.push_back(result->innovation_px);
-  landmark.gated_innovation_covariances.push_back(result->innovation_covariance);
-  if (landmark.gated_innovations_px.size() > needed) {
-    landmark.gated_innovations_px.erase(landmark.gated_innovations_px.begin());
-    landmark.gated_innovation_covariances.erase(landmark.gated_innovation_covariances.begin());
-  }
-  if (landmark.gated_innovations_px.size() < needed) return false;
+  auto& run = landmark.gated_run;
+  run.push_back({result->innovation_px, result->innovation_covariance});
+  if (run.size() > needed) run.erase(run.begin());
+  if (run.size() < needed) return false;
   Eigen::Vector2d mean = Eigen::Vector2d::Zero();
-  for (const Eigen::Vector2d& nu : landmark.gated_innovations_px) mean += nu;
+  for (const auto& gated : run) mean += gated.innovation_px;
   mean /= static_cast<double>(needed);
-  for (std::size_t i = 0; i < needed; ++i) {
-    const Eigen::Vector2d spread = landmark.gated_innovations_px[i] - mean;
-    if (spread.dot(landmark.gated_innovation_covariances[i].ldlt().solve(spread)) >
-        config_.gate_chi2) {
+  for (const auto& gated : run) {
+    const Eigen::Vector2d spread = gated.innovation_px - mean;
+    if (spread.dot(gated.covariance_px2.ldlt().solve(spread)) > config_.gate_chi2) {
       return false;  // the gated detections disagree: bad detections, not a pose jump
     }
   }
@@ -411,11 +404,15 @@ bool PoseEkf::reanchorAfterGating(std::size_t index, const Observation& observat
   } else {
     shape /= rotation_variance;
   }
+  const Eigen::MatrixXd P_before = P_;
   P_.topLeftCorner<6, 6>() += sigma_rad * sigma_rad * shape;
   symmetrize(P_);
   VpUpdateResult widened = *result;
   Eigen::MatrixXd H;
-  if (!innovation(index, observation, &widened, &H)) return false;
+  if (!innovation(index, observation, &widened, &H)) {
+    P_ = P_before;
+    return false;
+  }
   *result = widened;
   acceptUpdate(index, H, observation, result);
   ++counters_.reanchors;

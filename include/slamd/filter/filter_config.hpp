@@ -34,7 +34,7 @@ struct VanishingPointConfig {
   /// `hough_theta_deg` (double, default 2, 0.1..10, degrees): angle resolution of the Hough space.
   /// The Hough transform's cost is proportional to the number of angles, and the segments are
   /// refitted to their edge pixels afterwards, so 2 degrees loses nothing measurable: TUM fr1/xyz
-  /// filter CPU median 5.9 -> 3.7 ms per frame (quiet machine), rendered low-texture corridor
+  /// filter CPU median 5.9 -> 3.9 ms per frame (quiet machine), rendered low-texture corridor
   /// (30 m walk, 5 seeds) end yaw / pitch errors within the seed-to-seed spread of 1 degree's.
   double hough_theta_deg = 2.0;
   /// `hough_threshold` (int, default 40, 1..1000, votes at full resolution; multiplied by
@@ -160,9 +160,10 @@ struct FilterConfig {
   /// odometry jump. When an established landmark (at least reanchor_min_updates accepted updates)
   /// has its last reanchor_detections vanishing points gated, and their innovations agree with
   /// each other (each within gate_chi2 of their mean), the pose has jumped, not the direction: one
-  /// bad odometry increment with an over-confident covariance. The rotation covariance
-  /// perpendicular to the direction is widened by the mean innovation's angle (twice it, as a
-  /// standard deviation) and the detection is applied. Without it the landmark was gated until
+  /// bad odometry increment with an over-confident covariance. The pose covariance is widened by
+  /// the jump (sigma = twice the mean innovation's angle, in the shape of the latest odometry
+  /// increment's noise, the rotation about the direction left out) and the detection is applied
+  /// (pose_ekf.hpp, "Re-anchoring"). Without it the landmark was gated until
   /// retired and a new one was created at the wrong pose (rendered corridor, texture 0.02, seed
   /// 45, fovis: a 0.4 deg jump at frame 696 stayed in the filtered pose to the end).
   int reanchor_detections = 5;

@@ -69,14 +69,14 @@
 // landmark, and every later detection is gated although they all agree with each other. When the
 // last reanchor_detections detections of a landmark with at least reanchor_min_updates accepted
 // updates are gated and each innovation lies within gate_chi2 of their mean (under its own S), the
-// rotation covariance perpendicular to the direction, in the camera frame, is widened by
-// sigma = 2 * |mean innovation| / f (radians), and the detection is applied: the pose returns to
-// the landmark instead of the landmark being retired and replaced by one at the wrong pose. The
-// widening has the shape of the latest odometry increment's noise (G Q G^T, its rotation block
+// pose covariance is widened by the jump, sigma = 2 * |mean innovation| / f (radians), and the
+// detection is applied: the pose returns to the landmark instead of the landmark being retired and
+// replaced by one at the wrong pose. The widening has the shape of the latest odometry increment's
+// noise (G Q G^T with the rotation about the direction projected out, its rotation block
 // normalised to sigma^2 per observable axis): a wrong increment turns and shifts the camera
 // together, so the translation is corrected with the rotation. Widening the rotation alone left
-// a 2.5 cm sideways error behind a 0.55 deg jump (rendered corridor, seed 43, orb). The
-// rotation about the direction itself, which no vanishing point observes, is not widened.
+// a 2.5 cm sideways error behind a 0.55 deg jump (rendered corridor, seed 43, orb). The rotation
+// about the direction itself, which no vanishing point observes, is not widened.
 // Covariance updates use the Joseph form (I - KH) P (I - KH)^T + K R K^T.
 // Reset: after an update moves the rotation by dtheta (R' = R exp(dtheta)), the rotation block of
 // the covariance is re-expressed at R' with e' = exp(dtheta)^T e: the error is kept unchanged in
@@ -170,10 +170,13 @@ struct DirectionLandmark {
   /// landmark_window (consistency statistics).
   std::vector<double> recent_nis;
   std::size_t recent_next = 0;
-  /// Innovations (pixels) and their covariances S of the consecutive gated vanishing points of its
-  /// direction since its last accepted one (re-anchoring, filter.reanchor_detections).
-  std::vector<Eigen::Vector2d> gated_innovations_px;
-  std::vector<Eigen::Matrix2d> gated_innovation_covariances;
+  /// The consecutive gated vanishing points of its direction since its last accepted one, at
+  /// most filter.reanchor_detections (re-anchoring).
+  struct GatedInnovation {
+    Eigen::Vector2d innovation_px;
+    Eigen::Matrix2d covariance_px2;  ///< S
+  };
+  std::vector<GatedInnovation> gated_run;
 };
 
 struct EkfCounters {
@@ -334,8 +337,8 @@ class PoseEkf {
   void acceptUpdate(std::size_t index, const Eigen::MatrixXd& H, const Observation& observation,
                     VpUpdateResult* result);
   /// Records a gated vanishing point of landmark index's direction; when the last
-  /// reanchor_detections of them agree, widens the rotation covariance and applies this one.
-  /// True when it did (result updated, status kAccepted).
+  /// reanchor_detections of them agree, widens the pose covariance and applies this one.
+  /// True when it did (result updated, status kAccepted); false leaves the state unchanged.
   bool reanchorAfterGating(std::size_t index, const Observation& observation,
                            VpUpdateResult* result);
   int addLandmarkUnchecked(const Observation& observation, bool active);
