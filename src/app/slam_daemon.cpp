@@ -5,6 +5,7 @@
 #include <chrono>
 #include <fstream>
 #include <mutex>
+#include <sstream>
 #include <unordered_map>
 
 #include <opencv2/core.hpp>
@@ -57,6 +58,65 @@ struct MappingThreadState {
   /// Pose each kept keyframe cloud is in the map at (corrected world).
   std::unordered_map<std::int64_t, SE3> keyframe_map_poses;
 };
+
+/// Published poses by tracking state, and the current loss. Written by the publish thread; the
+/// atomics are read by the control thread for the status note, the rest after the publish thread
+/// has been joined.
+struct TrackingTally {
+  std::atomic<std::uint64_t> tracked{0};  ///< measured: OK or RELOCALIZED
+  std::atomic<std::uint64_t> predicted{0};
+  std::atomic<std::uint64_t> lost{0};
+  std::atomic<std::uint64_t> not_initialized{0};
+  /// Frame time of the first pose of the current loss (predicted or lost), -1 while tracking.
+  std::atomic<Utime> loss_start_utime{-1};
+  std::atomic<Utime> latest_utime{0};
+  std::atomic<std::uint64_t> loss_frames{0};  ///< poses in the current loss
+  double longest_loss_s = 0.0;
+  TrackingState last_state = TrackingState::kNotInitialized;
+
+  void record(TrackingState state, Utime utime) {
+    last_state = state;
+    latest_utime.store(utime, std::memory_order_relaxed);
+    const bool measured = state == TrackingState::kOk || state == TrackingState::kRelocalized;
+    const bool losing = state == TrackingState::kPredicted || state == TrackingState::kLost;
+    (measured                               ? tracked
+     : state == TrackingState::kPredicted   ? predicted
+     : state == TrackingState::kLost        ? lost
+                                            : not_initialized)
+        .fetch_add(1, std::memory_order_relaxed);
+    const Utime start = loss_start_utime.load(std::memory_order_relaxed);
+    if (losing) {
+      if (start < 0) loss_start_utime.store(utime, std::memory_order_relaxed);
+      loss_frames.fetch_add(1, std::memory_order_relaxed);
+      longest_loss_s = std::max(longest_loss_s, start < 0 ? 0.0 : utimeToSeconds(utime - start));
+    } else if (start >= 0) {
+      // The loss lasted until this frame, the first measured again (or a reset).
+      longest_loss_s = std::max(longest_loss_s, utimeToSeconds(utime - start));
+      loss_start_utime.store(-1, std::memory_order_relaxed);
+      loss_frames.store(0, std::memory_order_relaxed);
+    }
+  }
+
+  /// "tracking lost for 1.2 s (36 frames)" during a loss, else empty.
+  std::string lossNote() const {
+    const Utime start = loss_start_utime.load(std::memory_order_relaxed);
+    if (start < 0) return {};
+    std::ostringstream out;
+    out.precision(2);
+    out << std::fixed << "tracking lost for "
+        << utimeToSeconds(latest_utime.load(std::memory_order_relaxed) - start) << " s ("
+        << loss_frames.load(std::memory_order_relaxed) << " frames)";
+    return out.str();
+  }
+};
+
+/// Why frames are dropped at a stage's input, for the exit summary.
+const char* dropReason(const std::string& stage) {
+  if (stage == "tracking") return "tracking slower than frames arrive";
+  if (stage == "vanishing") return "vanishing-point detection slower than frames arrive";
+  if (stage == "mapping") return "mapping takes the newest frame and skips the rest";
+  return "its queue was full";
+}
 
 /// Largest distance a keyframe moves between two sets of poses: translation plus the rotation
 /// angle times a 2 m lever arm (a point 2 m in front of the camera), metres.
@@ -124,6 +184,7 @@ struct SlamDaemon::Impl {
 
   /// Capture-to-publication latency, recorded by the publish thread.
   LatencyHistogram end_to_end;
+  TrackingTally tracking_tally;
 
   // --- owned by the publish thread while running, by the control thread after stop ----------
   Trajectory trajectory;
@@ -172,6 +233,9 @@ struct SlamDaemon::Impl {
   void serveMapRequest(LcmBus& bus, const MapRequest& request);
   void publishMapOutputs(LcmBus& bus, const MapperOutputs& outputs);
   void writeMetrics(const std::vector<StageStats>& stats, const LatencySummary& end_to_end_latency);
+  void logTrackingSummary() const;
+  void logDropSummary(const std::vector<StageStats>& stats,
+                      const FrameSourceStats& source_stats) const;
 };
 
 SlamDaemon::SlamDaemon(Config& config, const DaemonOverrides& overrides)
@@ -247,6 +311,13 @@ void SlamDaemon::Impl::publishStatus(LcmBus& bus, StatusBuilder& builder, Pipeli
   extras.num_loops = backend_loops.load(std::memory_order_relaxed);
   extras.num_relocalizations = backend_relocalizations.load(std::memory_order_relaxed);
   extras.message = note;
+  const std::string loss = tracking_tally.lossNote();
+  if (!loss.empty()) extras.message += (extras.message.empty() ? "" : "; ") + loss;
+  if (source_stats.frames_behind_schedule > 0) {
+    extras.message += (extras.message.empty() ? "" : "; ") +
+                      std::to_string(source_stats.frames_behind_schedule) +
+                      " frames passed over: capture behind its real-time schedule";
+  }
   const std::uint64_t malformed = bus.malformedTotal();
   if (malformed > 0) {
     extras.message += (extras.message.empty() ? "" : "; ") + std::to_string(malformed) +
@@ -437,6 +508,7 @@ int SlamDaemon::Impl::run(ShutdownSignals& signals) {
         }
         pose.parent_frame = daemon.world_frame;
         pose.child_frame = daemon.camera_frame;
+        tracking_tally.record(pose.tracking_state, pose.utime);
         bus->publishMessage(channels.pose, toPoseMessage(pose));
         bus->publishMessage(channels.bot_pose, toBotCorePose(pose));
         end_to_end.recordNs(steadyNowNs() - packet.frame->received_steady_ns);
@@ -524,6 +596,21 @@ int SlamDaemon::Impl::run(ShutdownSignals& signals) {
   summary.errors += source_stats.frames_skipped;
   summary.drops += source_stats.frames_dropped + frames_dropped_paused.load() +
                    commands_dropped.load();
+  summary.frames_behind_schedule = source_stats.frames_behind_schedule;
+  for (const auto& stage : stats) {
+    if (stage.name != "tracking") continue;
+    for (const auto& edge : stage.inputs) {
+      summary.frames_dropped_before_tracking += edge.dropped + edge.discarded;
+    }
+  }
+  summary.frames_dropped_other =
+      summary.drops - summary.frames_behind_schedule - summary.frames_dropped_before_tracking;
+  summary.poses_tracked = tracking_tally.tracked.load();
+  summary.poses_predicted = tracking_tally.predicted.load();
+  summary.poses_lost = tracking_tally.lost.load();
+  summary.poses_not_initialized = tracking_tally.not_initialized.load();
+  summary.longest_loss_s = tracking_tally.longest_loss_s;
+  summary.tracking_lost_at_end = tracking_tally.loss_start_utime.load() >= 0;
   summary.malformed_commands = bus->malformedCount(channels.command);
   summary.duration_s = static_cast<double>(steadyNowNs() - start_ns) * 1e-9;
   const LatencySummary latency = end_to_end.summary();
@@ -533,8 +620,11 @@ int SlamDaemon::Impl::run(ShutdownSignals& signals) {
   for (const auto& stage : stats) {
     std::uint64_t dropped = 0;
     for (const auto& edge : stage.inputs) dropped += edge.dropped + edge.discarded;
-    SLAMD_LOG_INFO(kLog) << "stage " << stage.name << ": " << stage.processed << " processed, "
-                         << dropped << " dropped at its input, " << stage.errors
+    SLAMD_LOG_INFO(kLog) << "stage " << stage.name << ": " << stage.processed << " processed"
+                         << (stage.heartbeats > 0
+                                 ? " (and " + std::to_string(stage.heartbeats) + " heartbeats)"
+                                 : std::string())
+                         << ", " << dropped << " dropped at its input, " << stage.errors
                          << " errors; time per item p50 " << stage.latency.p50_ms << " ms, p95 "
                          << stage.latency.p95_ms << " ms, p99 " << stage.latency.p99_ms << " ms";
   }
@@ -545,6 +635,8 @@ int SlamDaemon::Impl::run(ShutdownSignals& signals) {
                        << summary.duration_s << " s; capture-to-pose latency p50 "
                        << latency.p50_ms << " ms, p95 " << latency.p95_ms << " ms, p99 "
                        << latency.p99_ms << " ms";
+  logTrackingSummary();
+  logDropSummary(stats, source_stats);
   if (vanishing_points_late.load() + vanishing_points_overflowed.load() > 0) {
     SLAMD_LOG_INFO(kLog) << "vanishing points: " << vanishing_points_late.load()
                          << " frames filtered without their detection (late or dropped), "
@@ -553,6 +645,61 @@ int SlamDaemon::Impl::run(ShutdownSignals& signals) {
   if (!daemon.metrics_out.empty()) writeMetrics(stats, latency);
   if (backend) finishBackend();
   return writeOutputs();
+}
+
+void SlamDaemon::Impl::logTrackingSummary() const {
+  std::ostringstream line;
+  line.precision(2);
+  line << std::fixed << "tracking: " << summary.poses_tracked << " of " << summary.poses_published
+       << " poses measured, " << summary.poses_predicted << " predicted, " << summary.poses_lost
+       << " lost, " << summary.poses_not_initialized << " before the first; longest loss "
+       << summary.longest_loss_s << " s";
+  if (summary.poses_published == 0) {
+    SLAMD_LOG_WARN(kLog) << "tracking: no pose was published";
+  } else if (summary.poses_tracked == 0) {
+    SLAMD_LOG_WARN(kLog) << line.str() << "; tracking never succeeded";
+  } else if (summary.tracking_lost_at_end) {
+    SLAMD_LOG_WARN(kLog) << line.str() << "; tracking LOST at the end ("
+                         << tracking_tally.lossNote() << ")";
+  } else if (summary.poses_predicted + summary.poses_lost > 0) {
+    SLAMD_LOG_WARN(kLog) << line.str() << "; tracking OK at the end";
+  } else {
+    SLAMD_LOG_INFO(kLog) << line.str() << "; tracking OK throughout";
+  }
+}
+
+void SlamDaemon::Impl::logDropSummary(const std::vector<StageStats>& stats,
+                                      const FrameSourceStats& source_stats) const {
+  if (summary.drops == 0) {
+    SLAMD_LOG_INFO(kLog) << "drops: none";
+    return;
+  }
+  std::ostringstream line;
+  line << "drops: " << summary.drops << " in all";
+  if (source_stats.frames_behind_schedule > 0) {
+    line << "; " << source_stats.frames_behind_schedule
+         << " frames passed over by the source, behind its real-time schedule (reading, decoding "
+            "or rendering, or the CPU it shares, was too slow)";
+  }
+  if (source_stats.frames_dropped > source_stats.frames_behind_schedule) {
+    line << "; " << source_stats.frames_dropped - source_stats.frames_behind_schedule
+         << " lost by the source (device or receive buffer overflow)";
+  }
+  for (const auto& stage : stats) {
+    std::uint64_t dropped = 0;
+    for (const auto& edge : stage.inputs) dropped += edge.dropped + edge.discarded;
+    if (dropped > 0) {
+      line << "; " << dropped << " at the input of " << stage.name << " ("
+           << dropReason(stage.name) << ")";
+    }
+  }
+  if (frames_dropped_paused.load() > 0) {
+    line << "; " << frames_dropped_paused.load() << " frames read while paused";
+  }
+  if (commands_dropped.load() > 0) {
+    line << "; " << commands_dropped.load() << " commands (command queue full)";
+  }
+  SLAMD_LOG_WARN(kLog) << line.str();
 }
 
 void SlamDaemon::Impl::writeMetrics(const std::vector<StageStats>& stats,
@@ -565,6 +712,14 @@ void SlamDaemon::Impl::writeMetrics(const std::vector<StageStats>& stats,
   json.key("frames_captured").value(static_cast<std::int64_t>(summary.frames_captured));
   json.key("poses_published").value(static_cast<std::int64_t>(summary.poses_published));
   json.key("frames_mapped").value(static_cast<std::int64_t>(summary.frames_mapped));
+  json.key("poses_tracked").value(static_cast<std::int64_t>(summary.poses_tracked));
+  json.key("poses_predicted").value(static_cast<std::int64_t>(summary.poses_predicted));
+  json.key("poses_lost").value(static_cast<std::int64_t>(summary.poses_lost));
+  json.key("longest_loss_s").value(summary.longest_loss_s);
+  json.key("tracking_lost_at_end").value(summary.tracking_lost_at_end);
+  json.key("frames_behind_schedule").value(static_cast<std::int64_t>(summary.frames_behind_schedule));
+  json.key("frames_dropped_before_tracking")
+      .value(static_cast<std::int64_t>(summary.frames_dropped_before_tracking));
   json.key("drops").value(static_cast<std::int64_t>(summary.drops));
   json.key("errors").value(static_cast<std::int64_t>(summary.errors));
   json.key("duration_s").value(summary.duration_s);
@@ -578,6 +733,7 @@ void SlamDaemon::Impl::writeMetrics(const std::vector<StageStats>& stats,
   for (const auto& stage : stats) {
     json.key(stage.name).beginObject();
     json.key("processed").value(static_cast<std::int64_t>(stage.processed));
+    json.key("heartbeats").value(static_cast<std::int64_t>(stage.heartbeats));
     json.key("p50_ms").value(stage.latency.p50_ms);
     json.key("p95_ms").value(stage.latency.p95_ms);
     json.key("p99_ms").value(stage.latency.p99_ms);

@@ -207,6 +207,9 @@ struct OpenNi2Source::Impl {
   bool has_color = false;
   bool opened = false;
   double depth_scale = 1000.0;  // raw units per metre, from the depth pixel format
+  /// Depth registered to colour, as the device (or the recording's device properties) says;
+  /// unset when it cannot tell.
+  std::optional<bool> depth_registered;
   int depth_frames_total = -1;  // recordings: frames in the file per stream
   int color_frames_total = -1;
   int last_depth_index = -1;
@@ -335,7 +338,7 @@ void openDevice(OpenNi2Source::Kind kind, const std::string& uri, const OpenNi2C
     if (playback != nullptr) {
       playback->setRepeatEnabled(false);
       // -1: manual, a new frame only when the previous one was read (nothing lost).
-      playback->setSpeed(config.oni_realtime ? 1.0f : -1.0f);
+      playback->setSpeed(config.oni_realtime ? static_cast<float>(config.oni_speed) : -1.0f);
       s.depth_frames_total = playback->getNumberOfFrames(s.depth);
       s.color_frames_total = s.has_color ? playback->getNumberOfFrames(s.color) : -1;
     }
@@ -379,6 +382,18 @@ void openDevice(OpenNi2Source::Kind kind, const std::string& uri, const OpenNi2C
   } else if (mode.getResolutionX() != k.width || mode.getResolutionY() != k.height) {
     k = k.scaled(mode.getResolutionX(), mode.getResolutionY());
   }
+  s.depth_registered.reset();
+  openni::ImageRegistrationMode registration = openni::IMAGE_REGISTRATION_OFF;
+  if (s.has_color && s.device.getProperty(openni::DEVICE_PROPERTY_IMAGE_REGISTRATION,
+                                          &registration) == openni::STATUS_OK) {
+    s.depth_registered = registration == openni::IMAGE_REGISTRATION_DEPTH_TO_COLOR;
+  }
+  if (kind == OpenNi2Source::Kind::kFile) {
+    SLAMD_LOG_INFO(kComponent)
+        << "recording " << uri << ": " << s.depth_frames_total << " depth and "
+        << s.color_frames_total << " colour frames; depth registered to colour: "
+        << (!s.depth_registered ? "not recorded" : *s.depth_registered ? "yes" : "no");
+  }
   s.last_depth_index = -1;
   s.last_color_index = -1;
   s.clock_anchored = false;
@@ -393,6 +408,12 @@ std::optional<CameraIntrinsics> OpenNi2Source::intrinsics() const {
 }
 
 int OpenNi2Source::recordedDepthFrames() const { return impl_->depth_frames_total; }
+
+int OpenNi2Source::recordedColorFrames() const { return impl_->color_frames_total; }
+
+std::optional<bool> OpenNi2Source::depthRegisteredToColor() const {
+  return impl_->depth_registered;
+}
 
 void OpenNi2Source::close() {
   if (impl_) impl_->closeAll();
@@ -477,7 +498,25 @@ FrameRead OpenNi2Source::next(std::chrono::milliseconds timeout) {
     openni::VideoFrameRef frame;
     if (streams[index]->readFrame(&frame) != openni::STATUS_OK || !frame.isValid()) continue;
     s.last_frame_time = std::chrono::steady_clock::now();
+    // A depth frame that will never be delivered: in real-time playback the reader was behind,
+    // on a device depth and colour lost sync. A colour image alone is not a frame.
+    auto depthFrameLost = [&] {
+      if (kind_ == Kind::kFile && config_.oni_realtime) {
+        counters_.droppedBehindSchedule();
+      } else {
+        counters_.dropped();
+      }
+    };
     if (index == 0) {
+      if (s.pending_depth.isValid()) depthFrameLost();  // replaced before its colour came
+      if (kind_ == Kind::kFile && config_.oni_realtime) {
+        // OpenNI's real-time player replaces a frame nobody read by the next one: count the gap
+        // (recorded frame indices start at 1).
+        for (int missed = std::max(s.last_depth_index, 0) + 1; missed < frame.getFrameIndex();
+             ++missed) {
+          counters_.droppedBehindSchedule();
+        }
+      }
       s.last_depth_index = frame.getFrameIndex();
       s.pending_depth = frame;
     } else {
@@ -494,8 +533,12 @@ FrameRead OpenNi2Source::next(std::chrono::milliseconds timeout) {
       const auto tc = static_cast<std::int64_t>(s.pending_color.getTimestamp());
       if (std::llabs(td - tc) > half_period_us) {
         // The older one has no partner any more: drop it and wait for the next.
-        (td < tc ? s.pending_depth : s.pending_color).release();
-        counters_.dropped();
+        if (td < tc) {
+          s.pending_depth.release();
+          depthFrameLost();
+        } else {
+          s.pending_color.release();
+        }
         continue;
       }
     }

@@ -39,6 +39,7 @@ void PacedSource::open() {
   pending_.reset();
   started_ = false;
   index_ = 0;
+  pending_index_ = 0;
   if (inner_->isLive() && config_.mode != PacingMode::kAsFastAsPossible) {
     SLAMD_LOG_WARN("capture.pacing")
         << inner_->description() << " is live: frames arrive on the device's clock, pacing "
@@ -46,15 +47,25 @@ void PacedSource::open() {
   }
 }
 
-std::chrono::steady_clock::time_point PacedSource::dueTime(const RgbdFrame& frame) const {
-  if (config_.mode == PacingMode::kRealTime) {
-    const double elapsed_s = utimeToSeconds(frame.utime - first_utime_) / config_.speed;
-    return start_ + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
-                        std::chrono::duration<double>(elapsed_s));
-  }
-  const double elapsed_s = static_cast<double>(index_) / config_.rate_hz;
+std::chrono::steady_clock::time_point PacedSource::dueTime(Utime utime,
+                                                         std::uint64_t index) const {
+  const double elapsed_s = config_.mode == PacingMode::kRealTime
+                               ? utimeToSeconds(utime - first_utime_) / config_.speed
+                               : static_cast<double>(index) / config_.rate_hz;
   return start_ + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
                       std::chrono::duration<double>(elapsed_s));
+}
+
+void PacedSource::passOverFramesBehindSchedule() {
+  // The frame next() reads gets index index_ + 1. While the frame after it is already due, a
+  // camera would have replaced it: pass over it unread.
+  const auto now = std::chrono::steady_clock::now();
+  while (true) {
+    const std::optional<Utime> after = inner_->upcomingUtime(1);
+    if (!after || dueTime(*after, index_ + 2) > now) return;
+    if (!inner_->dropUpcoming()) return;
+    ++index_;
+  }
 }
 
 FrameRead PacedSource::next(std::chrono::milliseconds timeout) {
@@ -66,6 +77,10 @@ FrameRead PacedSource::next(std::chrono::milliseconds timeout) {
       std::chrono::duration<double>(config_.max_lag_s));
   while (true) {
     if (!pending_) {
+      if (started_) passOverFramesBehindSchedule();
+      // A source that could have passed over the frame is not asked to drop it once read: it is
+      // the newest frame due (or the next one to come), however long reading it took.
+      pending_can_skip_ = inner_->upcomingUtime(0).has_value();
       const auto now = std::chrono::steady_clock::now();
       FrameRead read = inner_->next(std::chrono::duration_cast<std::chrono::milliseconds>(
           deadline > now ? deadline - now : std::chrono::steady_clock::duration::zero()));
@@ -80,14 +95,15 @@ FrameRead PacedSource::next(std::chrono::milliseconds timeout) {
       }
       ++index_;
       pending_ = std::move(read.frame);
+      pending_index_ = index_;
     }
-    const auto due = dueTime(*pending_);
+    const auto due = dueTime(pending_->utime, pending_index_);
     const auto now = std::chrono::steady_clock::now();
-    if (now > due + max_lag) {
-      // Read too late to be real time (the reader or the decoder fell behind): drop it, as a
-      // camera loses the frames nobody read, and try the next one.
+    if (!pending_can_skip_ && now > due + max_lag) {
+      // A source that must be read to advance (no upcomingUtime) and was read too late to be
+      // real time: drop the frame, as a camera loses the frames nobody read, and read the next.
       pending_.reset();
-      dropped_.fetch_add(1, std::memory_order_relaxed);
+      dropped_read_late_.fetch_add(1, std::memory_order_relaxed);
       if (now >= deadline) return FrameRead{FrameRead::Status::kTimeout, {}, {}};
       continue;
     }
@@ -108,9 +124,11 @@ FrameRead PacedSource::next(std::chrono::milliseconds timeout) {
 
 FrameSourceStats PacedSource::stats() const {
   FrameSourceStats stats = inner_->stats();
-  // Frames dropped for lateness were read from the inner source but never delivered.
-  const std::uint64_t dropped = dropped_.load(std::memory_order_relaxed);
+  // Frames dropped for lateness were read from the inner source but never delivered (frames
+  // passed over unread are counted by the inner source).
+  const std::uint64_t dropped = dropped_read_late_.load(std::memory_order_relaxed);
   stats.frames_dropped += dropped;
+  stats.frames_behind_schedule += dropped;
   stats.frames_read = stats.frames_read >= dropped ? stats.frames_read - dropped : 0;
   return stats;
 }

@@ -21,6 +21,12 @@ void SourceCounters::dropped(std::uint64_t count) {
   stats_.frames_dropped += count;
 }
 
+void SourceCounters::droppedBehindSchedule() {
+  std::lock_guard<std::mutex> lock(mutex_);
+  ++stats_.frames_dropped;
+  ++stats_.frames_behind_schedule;
+}
+
 void SourceCounters::reconnected() {
   std::lock_guard<std::mutex> lock(mutex_);
   ++stats_.reconnects;

@@ -114,6 +114,20 @@ FrameRead TumSource::next(std::chrono::milliseconds /*timeout*/) {
   return readPair(pairs_[item.pair]);
 }
 
+std::optional<Utime> TumSource::upcomingUtime(std::size_t ahead) const {
+  if (position_ + ahead >= playlist_.size()) return std::nullopt;
+  const PlayItem& item = playlist_[position_ + ahead];
+  if (!item.message.empty()) return std::nullopt;
+  return secondsToUtime(pairs_[item.pair].rgb_timestamp_s);
+}
+
+bool TumSource::dropUpcoming() {
+  if (!upcomingUtime(0)) return false;
+  ++position_;
+  counters_.droppedBehindSchedule();
+  return true;
+}
+
 FrameRead TumSource::readPair(const TumFramePair& pair) {
   const std::string rgb_path = joinPath(folder_, pair.rgb_path);
   const std::string depth_path = joinPath(folder_, pair.depth_path);

@@ -1,6 +1,7 @@
 #include "slamd/sources/create_frame_source.hpp"
 
 #include "slamd/capture/paced_source.hpp"
+#include "slamd/common/log.hpp"
 #include "slamd/capture/tum_source.hpp"
 #include "slamd/comms/lcm_frame_source.hpp"
 #ifdef SLAMD_HAVE_OPENNI2
@@ -36,9 +37,17 @@ std::unique_ptr<FrameSource> createRawFrameSource(const std::string& spec, Confi
   if (kind == "openni2" || kind == "oni") {
 #ifdef SLAMD_HAVE_OPENNI2
     if (kind == "oni") requireArgument("a file");
+    OpenNi2Config openni2 = OpenNi2Config::load(config);
+    const PacingConfig pacing = PacingConfig::load(config);
+    if (kind == "oni" && pacing.mode == PacingMode::kRealTime) {
+      // OpenNI's own player paces a recording like a camera (the newest frame, gaps counted)
+      // without reading the frames it passes over; slamd's pacer would have to read them.
+      openni2.oni_realtime = true;
+      openni2.oni_speed = pacing.speed;
+    }
     return std::make_unique<OpenNi2Source>(
         kind == "oni" ? OpenNi2Source::Kind::kFile : OpenNi2Source::Kind::kDevice, argument,
-        OpenNi2Config::load(config));
+        openni2);
 #else
     throw SourceError("source '" + spec +
                       "': this slamd was built without OpenNI2 (-DSLAMD_WITH_OPENNI2=OFF)");
@@ -63,7 +72,13 @@ std::unique_ptr<FrameSource> createFrameSource(const std::string& spec, Config& 
     source = std::make_unique<PreprocessedSource>(std::move(source), preprocess);
   }
   if (pacing.mode != PacingMode::kAsFastAsPossible) {
-    source = std::make_unique<PacedSource>(std::move(source), pacing);
+    if (!source->isLive()) {
+      source = std::make_unique<PacedSource>(std::move(source), pacing);
+    } else if (spec.rfind("oni:", 0) != 0) {
+      SLAMD_LOG_WARN("capture.pacing")
+          << spec << " is live: frames arrive on the device's clock, pacing "
+          << pacingModeName(pacing.mode) << " ignored";
+    }
   }
   return source;
 }

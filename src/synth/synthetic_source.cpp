@@ -136,6 +136,19 @@ FrameRead SyntheticSource::next(std::chrono::milliseconds /*timeout*/) {
   return read;
 }
 
+std::optional<Utime> SyntheticSource::upcomingUtime(std::size_t ahead) const {
+  const std::size_t index = static_cast<std::size_t>(position_) + ahead;
+  if (!open_ || index >= static_cast<std::size_t>(frame_count_)) return std::nullopt;
+  return synth::frameUtime(start_utime_, static_cast<int>(index), config_.motion.rate_hz);
+}
+
+bool SyntheticSource::dropUpcoming() {
+  if (!upcomingUtime(0)) return false;
+  ++position_;
+  counters_.droppedBehindSchedule();
+  return true;
+}
+
 std::unique_ptr<FrameSource> createSyntheticSource(const std::string& scene, Config& config) {
   const SyntheticConfig synthetic = SyntheticConfig::load(config);
   return std::make_unique<SyntheticSource>(scene, synthetic);

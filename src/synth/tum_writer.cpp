@@ -20,7 +20,7 @@ std::ofstream openList(const std::filesystem::path& path, const std::string& wha
 }
 
 void writePng(const std::filesystem::path& path, const cv::Mat& image) {
-  const std::vector<int> params = {cv::IMWRITE_PNG_COMPRESSION, 3};
+  const std::vector<int> params = {cv::IMWRITE_PNG_COMPRESSION, 1};
   bool ok = false;
   try {
     ok = cv::imwrite(path.string(), image, params);

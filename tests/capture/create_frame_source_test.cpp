@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include "slamd/capture/paced_source.hpp"
+#include "test_data.hpp"
 #include "tum_fixture.hpp"
 
 namespace slamd {
@@ -87,6 +88,20 @@ TEST(CreateFrameSource, OpenNi2DummyDeviceDeliversFrames) {
   ASSERT_EQ(read.status, FrameRead::Status::kFrame);
   EXPECT_EQ(read.frame->depth_m.size(), cv::Size(320, 240));
   source->close();
+}
+
+TEST(CreateFrameSource, RealTimePacingOfAnOniFileUsesOpenNisPlayer) {
+  const auto folder = test::findDataset("oni");
+  if (!folder) GTEST_SKIP() << test::missingDataMessage("oni");
+  Config config;
+  config.set("capture.pacing.mode", "realtime");
+  auto source = createFrameSource("oni:" + (*folder / "kinect_room_12frames.oni").string(), config);
+  EXPECT_EQ(dynamic_cast<PacedSource*>(source.get()), nullptr)
+      << "slamd's pacer would have to read every frame it drops";
+  EXPECT_TRUE(source->isLive());
+  source->open();
+  const auto all = test::readAll(*source);
+  EXPECT_EQ(all.frames.size() + source->stats().frames_behind_schedule, 12u);
 }
 #endif
 

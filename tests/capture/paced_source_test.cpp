@@ -9,16 +9,36 @@
 namespace slamd {
 namespace {
 
-// In-memory recorded source: `count` tiny frames `spacing_us` apart.
+// In-memory recorded source: `count` tiny frames `spacing_us` apart. With `can_pass_over` it
+// tells its timestamps ahead and passes over frames unread, as datasets and synthetic worlds do;
+// `read_time` makes every read take that long (a slow decoder or renderer).
 class FakeRecording : public FrameSource {
  public:
-  FakeRecording(int count, Utime spacing_us) : count_(count), spacing_us_(spacing_us) {}
+  FakeRecording(int count, Utime spacing_us, bool can_pass_over = false,
+                std::chrono::milliseconds read_time = std::chrono::milliseconds(0))
+      : count_(count),
+        spacing_us_(spacing_us),
+        can_pass_over_(can_pass_over),
+        read_time_(read_time) {}
   void open() override { index_ = 0; }
+  std::optional<Utime> upcomingUtime(std::size_t ahead) const override {
+    if (!can_pass_over_ || index_ + static_cast<int>(ahead) >= count_) return std::nullopt;
+    return utimeOf(index_ + static_cast<int>(ahead));
+  }
+  bool dropUpcoming() override {
+    if (!upcomingUtime(0)) return false;
+    ++index_;
+    ++stats_.frames_dropped;
+    ++stats_.frames_behind_schedule;
+    return true;
+  }
   FrameRead next(std::chrono::milliseconds) override {
     if (index_ >= count_) return {FrameRead::Status::kEndOfStream, {}, {}};
+    // Simulated work (decoding or rendering), not synchronisation.
+    if (read_time_.count() > 0) std::this_thread::sleep_for(read_time_);
     auto frame = std::make_shared<RgbdFrame>();
     frame->intrinsics = CameraIntrinsics{500, 500, 1.5, 1.5, 4, 4, DistortionModel::kNone, {}};
-    frame->utime = 1'000'000 + index_ * spacing_us_;
+    frame->utime = utimeOf(index_);
     frame->sequence = index_++;
     frame->depth_m = cv::Mat(4, 4, CV_32FC1, cv::Scalar(0.1f));
     frame->depth_m.at<float>(1, 1) = 2.0f;
@@ -31,8 +51,12 @@ class FakeRecording : public FrameSource {
   bool isLive() const override { return false; }
 
  private:
+  Utime utimeOf(int index) const { return 1'000'000 + index * spacing_us_; }
+
   int count_;
   Utime spacing_us_;
+  bool can_pass_over_;
+  std::chrono::milliseconds read_time_;
   int index_ = 0;
   FrameSourceStats stats_;
 };
@@ -99,6 +123,50 @@ TEST(PacedSource, FramesReadTooLateAreDroppedAndCounted) {
   EXPECT_GT(stats.frames_dropped, 0u);
   EXPECT_EQ(stats.frames_read, frames.size() + 1);
   EXPECT_EQ(stats.frames_read + stats.frames_dropped, 20u) << "every frame delivered or counted";
+}
+
+TEST(PacedSource, BehindScheduleItPassesOverFramesUnreadAndDeliversEveryFrameItReads) {
+  PacingConfig config;
+  config.mode = PacingMode::kRealTime;
+  config.max_lag_s = 0.005;
+  PacedSource source(std::make_unique<FakeRecording>(100, 1000, true), config);  // 1 kHz
+  source.open();
+  ASSERT_EQ(source.next(std::chrono::milliseconds(5)).status, FrameRead::Status::kFrame);
+  // Simulates a reader that stalls for 50 ms (not synchronisation).
+  std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  const auto frames = drain(source);
+  ASSERT_FALSE(frames.empty());
+  // The first frame after the stall is the newest one due: about 50 frames were passed over.
+  EXPECT_GE(frames.front().first->sequence, 45);
+  const FrameSourceStats stats = source.stats();
+  EXPECT_GE(stats.frames_behind_schedule, 44u);
+  EXPECT_EQ(stats.frames_dropped, stats.frames_behind_schedule);
+  // Nothing read was thrown away: every frame is delivered or passed over unread.
+  EXPECT_EQ(stats.frames_read, frames.size() + 1);
+  EXPECT_EQ(stats.frames_read + stats.frames_dropped, 100u);
+}
+
+TEST(PacedSource, ASlowSourceDeliversTheNewestDueFrameInsteadOfFallingFurtherBehind) {
+  // Frames 10 ms apart whose reading takes 25 ms (a renderer slower than real time): the old
+  // player read each frame, found it late and dropped it, so it never caught up. Now each read
+  // starts at the newest frame due, so about every third frame comes out (the old player
+  // delivered none of them).
+  PacingConfig config;
+  config.mode = PacingMode::kRealTime;
+  config.max_lag_s = 0.005;
+  PacedSource source(
+      std::make_unique<FakeRecording>(60, 10'000, true, std::chrono::milliseconds(25)), config);
+  source.open();
+  const auto frames = drain(source);
+  const FrameSourceStats stats = source.stats();
+  ASSERT_GE(frames.size(), 10u);
+  EXPECT_EQ(stats.frames_read, frames.size());
+  EXPECT_EQ(stats.frames_read + stats.frames_dropped, 60u);
+  for (std::size_t i = 1; i < frames.size(); ++i) {
+    EXPECT_GT(frames[i].first->sequence, frames[i - 1].first->sequence);
+    const auto gap = frames[i].first->sequence - frames[i - 1].first->sequence;
+    EXPECT_LE(gap, 20) << "frame " << frames[i].first->sequence << ": fell behind";
+  }
 }
 
 TEST(PreprocessedSource, CleansDepthWithoutTouchingTheWrappedFrames) {

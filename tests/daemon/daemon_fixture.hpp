@@ -10,6 +10,8 @@
 #include "slamd/app/slam_daemon.hpp"
 #include "slamd/common/config.hpp"
 #include "slamd/common/log.hpp"
+#include "slamd/common/program_options.hpp"
+#include "slamd/common/shutdown_signals.hpp"
 #include "test_data.hpp"
 
 namespace slamd {
@@ -34,6 +36,14 @@ class DaemonInProcess : public ::testing::Test {
     }
     config.set("synthetic.frames", std::to_string(frames));
     return config;
+  }
+
+  /// Runs a daemon over the whole source; expects exit code 0 and returns its summary.
+  DaemonSummary runToEnd(Config& config, const DaemonOverrides& overrides) {
+    ShutdownSignals signals;
+    SlamDaemon daemon(config, overrides);
+    EXPECT_EQ(daemon.run(signals), kExitOk);
+    return daemon.summary();
   }
 
   std::filesystem::path dir_;

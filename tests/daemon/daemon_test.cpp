@@ -34,6 +34,9 @@ TEST_F(DaemonInProcess, ProcessesEveryFrameOfASequenceAndWritesOutputs) {
   EXPECT_EQ(summary.frames_mapped, 40u);
   EXPECT_EQ(summary.drops, 0u);
   EXPECT_EQ(summary.errors, 0u);
+  EXPECT_EQ(summary.poses_tracked + summary.poses_not_initialized, 40u);
+  EXPECT_EQ(summary.poses_lost + summary.poses_predicted, 0u);
+  EXPECT_FALSE(summary.tracking_lost_at_end);
 
   const Trajectory estimate = readTumTrajectory(overrides.trajectory_out);
   const Trajectory truth = readTumTrajectory(overrides.groundtruth_out);
@@ -80,10 +83,7 @@ TEST_F(DaemonInProcess, BackEndThreadRunsAlongsideTheOtherStages) {
   overrides.source = "synthetic:room";
   overrides.trajectory_out = (dir_ / "trajectory.txt").string();
   overrides.map_out = (dir_ / "map.bt").string();
-  ShutdownSignals signals;
-  SlamDaemon daemon(config, overrides);
-  ASSERT_EQ(daemon.run(signals), kExitOk);
-  const DaemonSummary& summary = daemon.summary();
+  const DaemonSummary summary = runToEnd(config, overrides);
   EXPECT_EQ(summary.poses_published, 60u);
   EXPECT_EQ(summary.drops, 0u);
   EXPECT_EQ(summary.errors, 0u);
@@ -92,6 +92,39 @@ TEST_F(DaemonInProcess, BackEndThreadRunsAlongsideTheOtherStages) {
   // optimised pose.
   EXPECT_EQ(readTumTrajectory(overrides.trajectory_out).size(), 60u);
   EXPECT_TRUE(std::filesystem::exists(overrides.map_out));
+}
+
+TEST_F(DaemonInProcess, SummarySaysPlainlyWhenTrackingIsLostAtTheEnd) {
+  // The lens is covered from 1 s (frame 30) to the end: tracking has nothing to measure.
+  Config config = smallSyntheticConfig(60);
+  config.set("synthetic.blackout_start_s", "1.0");
+  config.set("synthetic.blackout_duration_s", "100");
+  DaemonOverrides overrides;
+  overrides.source = "synthetic:room";
+  const DaemonSummary summary = runToEnd(config, overrides);
+  EXPECT_EQ(summary.poses_published, 60u);
+  EXPECT_LE(summary.poses_tracked, 30u);
+  EXPECT_GE(summary.poses_tracked, 25u);
+  EXPECT_GE(summary.poses_lost + summary.poses_predicted, 30u);
+  EXPECT_TRUE(summary.tracking_lost_at_end);
+  EXPECT_GE(summary.longest_loss_s, 0.9);
+}
+
+TEST_F(DaemonInProcess, RealTimeSourceBehindScheduleDropsFramesUnreadAndCountsThem) {
+  // Played at 10x real time (300 Hz), the renderer cannot keep up: the source passes over the
+  // frames it is too late for without rendering them, and every frame is accounted for.
+  Config config = smallSyntheticConfig(150);
+  config.set("capture.pacing.mode", "realtime");
+  config.set("capture.pacing.speed", "10");
+  DaemonOverrides overrides;
+  overrides.source = "synthetic:room";
+  const DaemonSummary summary = runToEnd(config, overrides);
+  EXPECT_EQ(summary.frames_captured + summary.frames_behind_schedule, 150u);
+  EXPECT_GT(summary.frames_behind_schedule, 0u);
+  EXPECT_EQ(summary.frames_tracked + summary.frames_dropped_before_tracking,
+            summary.frames_captured);
+  EXPECT_EQ(summary.poses_published, summary.frames_tracked);
+  EXPECT_GT(summary.poses_tracked, 0u);
 }
 
 TEST_F(DaemonInProcess, UnknownSourceIsAConfigurationTimeError) {

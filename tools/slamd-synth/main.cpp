@@ -5,10 +5,15 @@
 //   slamd-synth --scene room --out /tmp/room --set synthetic.sensor.exact=true
 //
 // --scene/--trajectory/--frames/--seed set synthetic.* and win over --config and --set.
+// Frames are rendered --threads at a time (default: one per core) and written in order.
 // Exit codes: 2 usage, 3 configuration, 4 unknown scene, 5 output folder not writable.
 
+#include <algorithm>
+#include <deque>
+#include <future>
 #include <iostream>
 #include <string>
+#include <thread>
 
 #include "slamd/common/log.hpp"
 #include "slamd/common/program_options.hpp"
@@ -25,6 +30,7 @@ int main(int argc, char** argv) {
   options.addOption("frames", "N", "frame count (0 = the trajectory's natural length)");
   options.addOption("seed", "S", "seed of the scene, motion and sensor noise");
   options.addOption("out", "DIR", "output folder (created)");
+  options.addOption("threads", "N", "frames rendered at once (default: the machine's cores)");
   if (!options.parse(argc, argv)) return options.exitCode();
   if (!options.has("out")) {
     std::cerr << "slamd-synth: --out DIR is required\n" << options.usage();
@@ -32,6 +38,19 @@ int main(int argc, char** argv) {
   }
   const std::string scene = options.value("scene");
   const std::string out = options.value("out");
+  int threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  if (options.has("threads")) {
+    try {
+      threads = std::stoi(options.value("threads"));
+    } catch (const std::exception&) {
+      threads = 0;
+    }
+    if (threads < 1 || threads > 256) {
+      std::cerr << "slamd-synth: --threads " << options.value("threads")
+                << " is not a thread count (1..256)\n";
+      return kExitUsage;
+    }
+  }
 
   std::unique_ptr<SyntheticSource> source;
   try {
@@ -56,11 +75,24 @@ int main(int argc, char** argv) {
     TumSequenceWriter writer(out, "slamd-synth " + source->description(),
                              source->config().camera.depth_scale);
     writer.open();
-    while (true) {
-      const FrameRead read = source->next(std::chrono::milliseconds(1000));
-      if (read.status == FrameRead::Status::kEndOfStream) break;
-      if (read.status != FrameRead::Status::kFrame) continue;
-      writer.write(*read.frame);
+    // Frames depend only on their index: render `threads` of them at once, write them in order.
+    std::deque<std::future<RgbdFramePtr>> rendering;
+    int next_index = 0;
+    auto renderNext = [&] {
+      rendering.push_back(std::async(std::launch::async,
+                                     [&source, index = next_index] {
+                                       return source->renderFrame(index);
+                                     }));
+      ++next_index;
+    };
+    while (static_cast<int>(rendering.size()) < threads && next_index < source->frameCount()) {
+      renderNext();
+    }
+    while (!rendering.empty()) {
+      const RgbdFramePtr frame = rendering.front().get();
+      rendering.pop_front();
+      if (next_index < source->frameCount()) renderNext();
+      writer.write(*frame);
       if (writer.framesWritten() % 100 == 0) {
         SLAMD_LOG_INFO("slamd-synth") << writer.framesWritten() << " frames written";
       }

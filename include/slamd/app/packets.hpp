@@ -17,6 +17,7 @@ namespace slamd {
 /// capture -> tracking
 struct CapturePacket {
   RgbdFramePtr frame;  ///< null: heartbeat
+  bool isHeartbeat() const { return !frame; }
 };
 
 /// tracking -> filter
@@ -27,6 +28,7 @@ struct TrackedPacket {
   /// tracking; joined to the packet by the filter thread (empty when that thread is off or its
   /// result was late).
   std::optional<VanishingPoint> vanishing_point;
+  bool isHeartbeat() const { return !frame; }
 };
 
 /// vanishing-point thread -> filter thread
@@ -47,6 +49,7 @@ struct EstimatedPacket {
   std::optional<OdometryResult> odometry;
   PoseEstimate pose;  ///< the pose slamd publishes for this frame
   std::optional<VanishingPointReport> vanishing_point;
+  bool isHeartbeat() const { return !frame; }
 };
 
 }  // namespace slamd

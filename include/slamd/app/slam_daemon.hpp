@@ -34,10 +34,22 @@ struct DaemonOverrides {
 
 /// What a finished run did (logged at exit, returned for tests).
 struct DaemonSummary {
-  std::uint64_t frames_captured = 0;
-  std::uint64_t frames_tracked = 0;
+  std::uint64_t frames_captured = 0;  ///< frames delivered by the source (heartbeats excluded)
+  std::uint64_t frames_tracked = 0;   ///< frames the tracking stage processed
   std::uint64_t poses_published = 0;
   std::uint64_t frames_mapped = 0;
+  // Published poses by tracking state: measured (OK or RELOCALIZED), predicted without a
+  // measurement, lost, and before the first pose.
+  std::uint64_t poses_tracked = 0;
+  std::uint64_t poses_predicted = 0;
+  std::uint64_t poses_lost = 0;
+  std::uint64_t poses_not_initialized = 0;
+  double longest_loss_s = 0.0;      ///< longest run of predicted or lost poses, frame time
+  bool tracking_lost_at_end = false;  ///< the last published pose was not measured
+  // Why frames were dropped (each also counted in `drops`).
+  std::uint64_t frames_behind_schedule = 0;  ///< passed over by a real-time source running late
+  std::uint64_t frames_dropped_before_tracking = 0;  ///< tracking's input queue was full
+  std::uint64_t frames_dropped_other = 0;            ///< every other drop
   std::uint64_t drops = 0;
   std::uint64_t errors = 0;
   std::uint64_t malformed_commands = 0;

@@ -16,6 +16,10 @@
 // kSkipped with a message naming the file or message, and counted in stats().errors.
 // Frames come out with strictly increasing timestamps; a frame whose timestamp does not increase
 // is skipped and counted.
+//
+// Recordings that know their frames' timestamps before reading them (datasets, synthetic worlds)
+// also offer upcomingUtime() and dropUpcoming(), so that a real-time player that falls behind
+// passes over the frames it is too late for without reading, decoding or rendering them.
 
 #include <chrono>
 #include <cstdint>
@@ -47,6 +51,9 @@ struct FrameSourceStats {
   std::uint64_t frames_read = 0;     ///< frames delivered by next()
   std::uint64_t frames_skipped = 0;  ///< bad frames dropped (each also logged once)
   std::uint64_t frames_dropped = 0;  ///< good frames lost to pacing or overflow (live sources)
+  /// Of frames_dropped: frames a real-time player passed over unread because it was behind its
+  /// schedule (the capture thread, or what shares its CPU, was too slow).
+  std::uint64_t frames_behind_schedule = 0;
   std::uint64_t reconnects = 0;      ///< device re-opens after a disconnect
   std::string last_error;            ///< most recent skip or failure message
 };
@@ -70,6 +77,15 @@ class FrameSource {
   virtual std::optional<CameraIntrinsics> intrinsics() const { return std::nullopt; }
   /// Ground truth T_world_camera for evaluation (TUM groundtruth.txt, synthetic worlds).
   virtual std::optional<Trajectory> groundTruth() const { return std::nullopt; }
+
+  /// The timestamp of the frame `ahead` frames after the one next() would deliver now (ahead 0:
+  /// that frame), known without reading it; nullopt past the end, for a list entry that is
+  /// already known to be bad, and for sources that cannot tell (live ones).
+  virtual std::optional<Utime> upcomingUtime(std::size_t /*ahead*/) const { return std::nullopt; }
+  /// Passes over the frame next() would deliver, without reading it, and counts it in
+  /// stats().frames_dropped and frames_behind_schedule. False (and nothing happens) when the
+  /// source cannot do that; true only where upcomingUtime(0) has a value.
+  virtual bool dropUpcoming() { return false; }
 };
 
 }  // namespace slamd

@@ -19,7 +19,10 @@
 // timeout.
 //
 // Recording: played once (no repeat), as fast as frames are read (OpenNI's manual speed) or in
-// real time (capture.oni.realtime); the end of the file is kEndOfStream. Frame utime is the
+// real time (capture.oni.realtime, or capture.pacing.mode = realtime): then OpenNI's player runs
+// on the recorded clock like a camera, a reader that falls behind gets the newest frame, and the
+// frames it never read are counted as dropped behind schedule (gaps in the frame index). The end
+// of the file is kEndOfStream. Frame utime is the
 // recorded device timestamp (microseconds from the recording's start), so replays are
 // reproducible.
 //
@@ -31,6 +34,7 @@
 
 #include <chrono>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -53,6 +57,9 @@ struct OpenNi2Config {
   double reconnect_initial_s = 0.5;     ///< capture.openni2.reconnect_initial_s, (0, 60]
   double reconnect_max_s = 8.0;         ///< capture.openni2.reconnect_max_s, (0, 600]
   bool oni_realtime = false;            ///< capture.oni.realtime
+  /// Real-time playback speed (OpenNI's player), set from capture.pacing.speed when slamd's
+  /// pacing is realtime (createFrameSource); 1 = as recorded.
+  double oni_speed = 1.0;
 
   static OpenNi2Config load(Config& config);
 };
@@ -78,11 +85,17 @@ class OpenNi2Source : public FrameSource {
   void close() override;
   FrameSourceStats stats() const override { return counters_.snapshot(); }
   std::string description() const override;
-  bool isLive() const override { return kind_ == Kind::kDevice; }
+  /// Devices, and recordings played in real time: both run on their own clock.
+  bool isLive() const override { return kind_ == Kind::kDevice || config_.oni_realtime; }
   std::optional<CameraIntrinsics> intrinsics() const override;
 
-  /// Recordings: depth frames the file holds (from its index), after open(); -1 for devices.
+  /// Recordings: depth (colour) frames the file holds (from its index), after open(); -1 for
+  /// devices and for a recording without that stream.
   int recordedDepthFrames() const;
+  int recordedColorFrames() const;
+  /// After open(): whether depth is registered to colour (a device's mode after configuration, a
+  /// recording's recorded device property); nullopt without colour or when it cannot tell.
+  std::optional<bool> depthRegisteredToColor() const;
 
   struct Impl;  ///< opaque: OpenNI2 types stay out of this header
 

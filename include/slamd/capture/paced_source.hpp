@@ -9,10 +9,17 @@
 // Real time: frame i is due at start + (utime_i - utime_0) / speed, where start is the steady
 // time the first frame was delivered. Fixed rate: frame i is due at start + i / rate_hz.
 // next() waits for the due time but never longer than its timeout (it returns kTimeout and keeps
-// the frame for the next call). A frame read more than max_lag_s after it was due is dropped and
-// counted in stats().frames_dropped, as a camera loses frames nobody read: a paced source then
-// behaves like a live one, and isLive() says so, so the consumer must never block it (drop-oldest
-// queue). Live sources pass through unpaced. One owner thread.
+// the frame for the next call).
+//
+// Falling behind: like a camera, the player hands out the newest frame that is due. Before
+// reading, it passes over every frame whose successor is already due, without reading, decoding
+// or rendering it (FrameSource::dropUpcoming; counted in stats().frames_dropped and
+// frames_behind_schedule), so a slow reader never spends time on frames it would throw away.
+// A frame it did read is always delivered, however late. Only a source that cannot pass over
+// frames (no upcomingUtime) is read to advance: its frames read more than max_lag_s after they
+// were due are dropped and counted the same way.
+// A paced source behaves like a live one, and isLive() says so, so the consumer must never
+// block it (drop-oldest queue). Live sources pass through unpaced. One owner thread.
 
 #include <atomic>
 #include <memory>
@@ -29,7 +36,9 @@ struct PacingConfig {
   PacingMode mode = PacingMode::kAsFastAsPossible;  ///< capture.pacing.mode: fastest|realtime|fixed
   double speed = 1.0;      ///< capture.pacing.speed, real-time multiplier, (0, 100]
   double rate_hz = 30.0;   ///< capture.pacing.rate_hz for fixed, (0, 1000]
-  double max_lag_s = 0.1;  ///< capture.pacing.max_lag_s, drop frames later than this, (0, 60]
+  /// capture.pacing.max_lag_s, (0, 60]: sources that must be read to advance drop frames read
+  /// later than this
+  double max_lag_s = 0.1;
 
   static PacingConfig load(Config& config);
 };
@@ -53,7 +62,9 @@ class PacedSource : public FrameSource {
   const FrameSource& inner() const { return *inner_; }
 
  private:
-  std::chrono::steady_clock::time_point dueTime(const RgbdFrame& frame) const;
+  /// Due time of a frame with this timestamp (real time) or index since the first (fixed rate).
+  std::chrono::steady_clock::time_point dueTime(Utime utime, std::uint64_t index) const;
+  void passOverFramesBehindSchedule();
 
   std::unique_ptr<FrameSource> inner_;
   PacingConfig config_;
@@ -61,8 +72,10 @@ class PacedSource : public FrameSource {
   bool started_ = false;
   std::chrono::steady_clock::time_point start_;
   Utime first_utime_ = 0;
-  std::uint64_t index_ = 0;  ///< frames read from the inner source since the first
-  std::atomic<std::uint64_t> dropped_{0};
+  std::uint64_t index_ = 0;  ///< frames read or passed over since the first
+  std::uint64_t pending_index_ = 0;
+  bool pending_can_skip_ = false;  ///< pending_ came from a source that can pass over frames
+  std::atomic<std::uint64_t> dropped_read_late_{0};
 };
 
 }  // namespace slamd

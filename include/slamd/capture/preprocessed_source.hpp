@@ -39,6 +39,10 @@ class PreprocessedSource : public FrameSource {
   bool isLive() const override { return inner_->isLive(); }
   std::optional<CameraIntrinsics> intrinsics() const override { return inner_->intrinsics(); }
   std::optional<Trajectory> groundTruth() const override { return inner_->groundTruth(); }
+  std::optional<Utime> upcomingUtime(std::size_t ahead) const override {
+    return inner_->upcomingUtime(ahead);
+  }
+  bool dropUpcoming() override { return inner_->dropUpcoming(); }
 
   PreprocessingStats timings() const;
 

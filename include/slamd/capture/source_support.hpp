@@ -24,6 +24,8 @@ class SourceCounters {
   /// Counts a skipped frame and logs `message` (warn level) under `component`.
   void skipped(const char* component, const std::string& message);
   void dropped(std::uint64_t count = 1);
+  /// A frame passed over unread by a player behind its schedule (also counted as dropped).
+  void droppedBehindSchedule();
   void reconnected();
   /// Records a failure message (e.g. a disconnect) without counting a frame.
   void failure(const char* component, const std::string& message);

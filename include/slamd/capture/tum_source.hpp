@@ -51,6 +51,8 @@ class TumSource : public FrameSource {
   bool isLive() const override { return false; }
   std::optional<CameraIntrinsics> intrinsics() const override { return config_.camera.intrinsics; }
   std::optional<Trajectory> groundTruth() const override { return ground_truth_; }
+  std::optional<Utime> upcomingUtime(std::size_t ahead) const override;
+  bool dropUpcoming() override;
 
   /// The associated pairs in playback order (after open()).
   const std::vector<TumFramePair>& pairs() const { return pairs_; }

@@ -21,7 +21,13 @@
 // - kDropOldest: the producer never waits; a full queue evicts its oldest item (live sources).
 // - kDrainToNewest: the producer never waits (oldest evicted when full) and the consumer takes
 //   only the newest waiting item, dropping the older ones (a mapper that skips to the newest).
-// Every drop is counted exactly: pushed = processed + dropped + discarded at shutdown.
+// Every drop is counted exactly: pushed = processed + heartbeats + dropped + discarded at
+// shutdown.
+//
+// Heartbeats: an item type may mark items that carry no work and only wake the stages (a packet
+// without a frame) by declaring `bool isHeartbeat() const`. They flow like any item, but are
+// counted apart and not timed, so a stage's processed count, rate and time per item describe
+// real work only.
 //
 // End of stream: when a source returns SourceStep::end() (or stop() is called) it closes its
 // output queues; each stage processes everything left in its input, then closes its own outputs.
@@ -94,7 +100,8 @@ struct EdgeStats {
 /// Counters of one node.
 struct StageStats {
   std::string name;
-  std::uint64_t processed = 0;  ///< inputs processed (sources: items produced)
+  std::uint64_t processed = 0;  ///< inputs processed (sources: items produced), not heartbeats
+  std::uint64_t heartbeats = 0;  ///< heartbeat items passed on (see above)
   std::uint64_t emitted = 0;    ///< outputs passed on
   std::uint64_t errors = 0;     ///< process() calls that threw (item dropped, pipeline continues)
   std::vector<std::uint64_t> latency_buckets;  ///< LatencyHistogram::snapshot() of process()
@@ -104,6 +111,22 @@ struct StageStats {
 };
 
 namespace pipeline_detail {
+
+template <typename T, typename = void>
+struct HasIsHeartbeat : std::false_type {};
+template <typename T>
+struct HasIsHeartbeat<T, std::void_t<decltype(std::declval<const T&>().isHeartbeat())>>
+    : std::true_type {};
+
+template <typename T>
+bool isHeartbeatItem(const T& item) {
+  if constexpr (HasIsHeartbeat<T>::value) {
+    return item.isHeartbeat();
+  } else {
+    (void)item;
+    return false;
+  }
+}
 
 /// Shared run state of one pipeline, read by every node.
 struct RunControl {
@@ -284,6 +307,7 @@ class NodeBase {
     StageStats s;
     s.name = name_;
     s.processed = processed_.load(std::memory_order_relaxed);
+    s.heartbeats = heartbeats_.load(std::memory_order_relaxed);
     s.emitted = emitted_.load(std::memory_order_relaxed);
     s.errors = errors_.load(std::memory_order_relaxed);
     s.latency_buckets = latency_.snapshot();
@@ -297,7 +321,19 @@ class NodeBase {
   RunControl* control_;
   int nice_ = 0;
   std::atomic<bool> finished_{false};
+  /// Counts one item handled in `elapsed_ns`: timed and counted as processed unless it was a
+  /// heartbeat.
+  void countItem(bool heartbeat, std::int64_t elapsed_ns) {
+    if (heartbeat) {
+      heartbeats_.fetch_add(1, std::memory_order_relaxed);
+      return;
+    }
+    latency_.recordNs(elapsed_ns);
+    processed_.fetch_add(1, std::memory_order_relaxed);
+  }
+
   std::atomic<std::uint64_t> processed_{0};
+  std::atomic<std::uint64_t> heartbeats_{0};
   std::atomic<std::uint64_t> emitted_{0};
   std::atomic<std::uint64_t> errors_{0};
   LatencyHistogram latency_;
@@ -397,8 +433,7 @@ class SourceNode final : public NodeBase {
     }
     if (step.kind == SourceStep<T>::Kind::kEnd) return false;
     if (step.kind == SourceStep<T>::Kind::kItem && step.item) {
-      latency_.recordNs(steadyNowNs() - start_ns);
-      processed_.fetch_add(1, std::memory_order_relaxed);
+      countItem(isHeartbeatItem(*step.item), steadyNowNs() - start_ns);
       if (output_.emit(std::move(*step.item), sequential) > 0) {
         emitted_.fetch_add(1, std::memory_order_relaxed);
       }
@@ -455,22 +490,21 @@ class StageNode final : public NodeBase {
 
  private:
   void processOne(In item, bool sequential) {
+    const bool heartbeat = isHeartbeatItem(item);
     const std::int64_t start_ns = steadyNowNs();
     try {
       if constexpr (std::is_void_v<Out>) {
         fn_(std::move(item));
-        latency_.recordNs(steadyNowNs() - start_ns);
-        processed_.fetch_add(1, std::memory_order_relaxed);
+        countItem(heartbeat, steadyNowNs() - start_ns);
       } else {
         std::optional<Out> result = fn_(std::move(item));
-        latency_.recordNs(steadyNowNs() - start_ns);
-        processed_.fetch_add(1, std::memory_order_relaxed);
+        countItem(heartbeat, steadyNowNs() - start_ns);
         if (result && output_.emit(std::move(*result), sequential) > 0) {
           emitted_.fetch_add(1, std::memory_order_relaxed);
         }
       }
     } catch (const std::exception& e) {
-      processed_.fetch_add(1, std::memory_order_relaxed);
+      (heartbeat ? heartbeats_ : processed_).fetch_add(1, std::memory_order_relaxed);
       reportError(e.what());
     }
   }

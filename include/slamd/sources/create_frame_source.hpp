@@ -11,12 +11,14 @@
 // Specifications:
 //   tum:DIR            TUM RGB-D folder (TumSource; capture.tum.*, camera.* with depth scale 5000)
 //   openni2[:URI]      OpenNI2 device, first one without URI (OpenNi2Source; capture.openni2.*)
-//   oni:FILE           OpenNI2 recording, played once (capture.oni.realtime)
+//   oni:FILE           OpenNI2 recording, played once (capture.oni.realtime; capture.pacing.mode
+//                      realtime plays it with OpenNI's own real-time player at capture.pacing.speed)
 //   lcm:CHANNEL        slamd.rgbd_frame_t / kinect.frame_msg_t on LCM (LcmFrameSource;
 //                      capture.lcm.*)
 //   synthetic:SCENE    slamd's synthetic worlds (createSyntheticSource; synthetic.*)
 // Wrapping: PreprocessedSource when any capture.preprocess.* step is enabled, then PacedSource
-// when capture.pacing.mode is realtime or fixed.
+// when capture.pacing.mode is realtime or fixed and the source is not live (a live source runs on
+// its own clock: pacing is ignored, with a warning).
 // Throws SourceError for an unknown or malformed specification (naming the accepted ones) and
 // ConfigError for bad configuration values.
 

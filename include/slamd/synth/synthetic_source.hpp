@@ -23,7 +23,9 @@
 // Frames: colour CV_8UC3 BGR, depth CV_32F metres along z (NaN = no return), registered, with the
 // configured intrinsics; utime of frame i = start + round(i * 1e6 / rate_hz) microseconds.
 // Ground truth: T_world_camera of the camera optical frame in the scene's world frame (z up),
-// the TUM convention. Not live: next() renders as fast as it can (about 10-25 ms per frame).
+// the TUM convention. Not live: next() renders as fast as it can (about 10-25 ms per frame on a
+// quiet machine, several times that under load); a real-time player that falls behind passes
+// over frames without rendering them (dropUpcoming).
 // Frame i depends only on (scene, config, seed, i): bit-identical across runs.
 // One thread owns the source.
 
@@ -78,6 +80,8 @@ class SyntheticSource : public FrameSource {
     return config_.camera.intrinsics;
   }
   std::optional<Trajectory> groundTruth() const override { return ground_truth_; }
+  std::optional<Utime> upcomingUtime(std::size_t ahead) const override;
+  bool dropUpcoming() override;
 
   /// Frame `index` (0-based, any order), with the sensor model applied.
   RgbdFramePtr renderFrame(int index) const;
