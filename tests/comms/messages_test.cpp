@@ -1,5 +1,7 @@
 #include <gtest/gtest.h>
 
+#include <climits>
+#include <cstdint>
 #include <random>
 
 #include "bot_core/pose_t.hpp"
@@ -236,6 +238,67 @@ TYPED_TEST(MessageRoundTrip, RandomBytesNeverCrashTheDecoder) {
     (void)decodeMessage<TypeParam>(corrupted.data(), corrupted.size());
   }
   SUCCEED();
+}
+
+TYPED_TEST(MessageRoundTrip, AnyLengthFieldOverwrittenWithAHostileValueNeverCrashes) {
+  // Every aligned or unaligned 4-byte window after the hash is treated as a length field and
+  // overwritten: negative (a string of INT32_MIN bytes once read 2 GB past a 23-byte packet),
+  // zero, one past the buffer, huge. The decoder must reject the message or decode exactly what
+  // the bytes say.
+  const auto bytes = encodeMessage(example<TypeParam>());
+  const std::int32_t hostile[] = {INT32_MIN, -1, 0, static_cast<std::int32_t>(bytes.size()),
+                                  INT32_MAX};
+  for (std::size_t at = 8; at + 4 <= bytes.size(); ++at) {
+    for (const std::int32_t value : hostile) {
+      auto corrupted = bytes;
+      const auto raw = static_cast<std::uint32_t>(value);
+      for (int k = 0; k < 4; ++k) corrupted[at + k] = static_cast<std::uint8_t>(raw >> (24 - 8 * k));
+      const auto decoded = decodeMessage<TypeParam>(corrupted.data(), corrupted.size());
+      if (decoded) {
+        EXPECT_EQ(encodeMessage(*decoded), corrupted) << "offset " << at;
+      }
+    }
+  }
+}
+
+TYPED_TEST(MessageRoundTrip, TrailingBytesAreRejected) {
+  auto bytes = encodeMessage(example<TypeParam>());
+  bytes.push_back(0);
+  std::string error;
+  EXPECT_FALSE(decodeMessage<TypeParam>(bytes.data(), bytes.size(), &error).has_value());
+  EXPECT_NE(error.find("trailing"), std::string::npos) << error;
+}
+
+TEST(MessageDecode, A23ByteCommandWhoseStringLengthIsInt32MinIsRejected) {
+  // Hostile-input issue, row 1: this packet on SLAMD_COMMAND killed slamd with SIGSEGV.
+  auto bytes = encodeMessage(example<slamd::command_t>());
+  bytes.resize(8 + 8 + 1);  // hash, utime, command
+  for (const std::uint8_t b : {0x80, 0x00, 0x00, 0x00, 0x41, 0x42}) bytes.push_back(b);
+  ASSERT_EQ(bytes.size(), 23u);
+  std::string error;
+  EXPECT_FALSE(decodeMessage<slamd::command_t>(bytes.data(), bytes.size(), &error).has_value());
+  EXPECT_NE(error.find("string length"), std::string::npos) << error;
+}
+
+TEST(MessageDecode, PoseAndStatusWithAnEmptyOrNegativeStringLengthAreRejected) {
+  // Row 2: the same trick on SLAMD_POSE and SLAMD_STATUS killed slamd-pose-log and slamd-status.
+  // A string's length counts its NUL: 0 is as impossible as negative.
+  auto pose = encodeMessage(example<slamd::pose_t>());
+  const std::size_t parent_frame_length = 8 + 8 + 8;  // hash, utime, sequence
+  for (const std::uint8_t first : {0x80, 0x00}) {
+    auto corrupted = pose;
+    corrupted[parent_frame_length] = first;
+    for (int k = 1; k < 4; ++k) corrupted[parent_frame_length + k] = 0;
+    EXPECT_FALSE(decodeMessage<slamd::pose_t>(corrupted.data(), corrupted.size()).has_value());
+  }
+  auto status = encodeMessage(example<slamd::status_t>());
+  // The message string is last: its length field sits 4 + 3 bytes ("ok" + NUL) from the end.
+  const std::size_t message_length = status.size() - 7;
+  for (const std::uint8_t first : {0x80, 0xFF}) {
+    auto corrupted = status;
+    for (int k = 0; k < 4; ++k) corrupted[message_length + k] = first;
+    EXPECT_FALSE(decodeMessage<slamd::status_t>(corrupted.data(), corrupted.size()).has_value());
+  }
 }
 
 TEST(MessageDecode, AnotherTypesBytesAreRejected) {

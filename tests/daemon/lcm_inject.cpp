@@ -1,5 +1,7 @@
 // slamd-test-inject: publishes malformed messages on an LCM channel, for the daemon scenarios:
-// random bytes, and truncated or bit-flipped copies of a valid command_t.
+// random bytes, truncated or bit-flipped copies of a valid command_t, and the 23-byte command_t
+// whose string length is INT32_MIN (once a SIGSEGV in any receiver; its fingerprint is replaced by
+// the channel's type when the channel is SLAMD_POSE or SLAMD_STATUS).
 //   slamd-test-inject CHANNEL COUNT [SEED]
 
 #include <iostream>
@@ -8,6 +10,8 @@
 #include <vector>
 
 #include "slamd/command_t.hpp"
+#include "slamd/pose_t.hpp"
+#include "slamd/status_t.hpp"
 #include "slamd/comms/lcm_bus.hpp"
 
 int main(int argc, char** argv) {
@@ -26,7 +30,7 @@ int main(int argc, char** argv) {
   slamd::LcmBus bus("");
   for (int i = 0; i < count; ++i) {
     std::vector<std::uint8_t> bytes;
-    switch (i % 3) {
+    switch (i % 4) {
       case 0:  // random bytes of random length
         bytes.resize(1 + rng() % 2000);
         for (auto& b : bytes) b = static_cast<std::uint8_t>(rng());
@@ -34,11 +38,29 @@ int main(int argc, char** argv) {
       case 1:  // a valid message cut short
         bytes.assign(valid_bytes.begin(), valid_bytes.begin() + static_cast<long>(rng() % valid_bytes.size()));
         break;
-      default:  // a valid fingerprint followed by a corrupted length field
+      case 2:  // a valid fingerprint followed by a corrupted length field
         bytes = valid_bytes;
         for (std::size_t j = 8; j < bytes.size(); j += 3) bytes[j] = static_cast<std::uint8_t>(rng());
         bytes[17] = 0x7f;
         break;
+      default: {  // a valid fingerprint, then a string whose length field is INT32_MIN
+        // The fields before the first string: command_t utime, command; pose_t utime, sequence;
+        // status_t utime, num_stages 0, three latencies, tracking state, two voxel counts, three
+        // counters.
+        std::int64_t hash = slamd::command_t::getHash();
+        std::size_t before_string = 8 + 1;
+        if (channel == "SLAMD_POSE") {
+          hash = slamd::pose_t::getHash();
+          before_string = 8 + 8;
+        } else if (channel == "SLAMD_STATUS") {
+          hash = slamd::status_t::getHash();
+          before_string = 8 + 4 + 3 * 8 + 1 + 2 * 8 + 3 * 4;
+        }
+        for (int k = 0; k < 8; ++k) bytes.push_back(static_cast<std::uint8_t>(hash >> (56 - 8 * k)));
+        bytes.resize(8 + before_string, 0);
+        for (const std::uint8_t b : {0x80, 0x00, 0x00, 0x00, 0x41, 0x42}) bytes.push_back(b);
+        break;
+      }
     }
     if (!bus.publish(channel, bytes)) return 1;
   }

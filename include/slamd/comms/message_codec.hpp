@@ -24,17 +24,18 @@ template <typename Message>
 std::optional<Message> decodeMessage(const void* data, std::size_t size,
                                      std::string* error = nullptr) {
   Message message;
-  if (!MessagePrecheck<Message>::plausible(data, size)) {
+  if (!plausibleEncoding<Message>(data, size)) {
     if (error) {
       *error = std::string("cannot decode ") + std::to_string(size) + " bytes as " +
-               Message::getTypeName() + " (truncated, or an array count larger than the message)";
+               Message::getTypeName() +
+               " (truncated, trailing bytes, or a string length or array count that does not fit)";
     }
     return std::nullopt;
   }
   int status = -1;
   try {
-    // lcm-gen's decoders check lengths against the buffer; anything they still throw (a vector
-    // resize on a corrupt count the pre-check cannot see) is caught here.
+    // The structural check above has verified every length; anything the decoder still throws
+    // (an allocation failure) is caught here.
     // GCC 12 warns, after inlining, that lcm-gen's hash variable "may be used uninitialized" when
     // the length check fails first; the generated code returns before using it.
 #pragma GCC diagnostic push

@@ -1,24 +1,40 @@
 #pragma once
-// Structural pre-check of encoded LCM messages, run before lcm-gen's decoder.
+// Structural check of encoded LCM messages, run before lcm-gen's decoder sees the bytes.
 //
-// Why: LCM 1.3.1's generated decoders resize a vector to the count read from the wire *before*
-// checking that the buffer holds that many elements. A corrupt count in one malformed message
-// makes the decoder allocate (and zero) gigabytes, enough to get a robot's daemon OOM-killed.
-// For every type slamd receives that has a variable-length array, this walks the encoding (big-
-// endian, as LCM writes it) and rejects counts that cannot fit in the remaining bytes.
-// Types without variable-length arrays need no pre-check (the primary template accepts).
+// Why: LCM's generated C++ decoders trust the lengths they read. A string whose length field is
+// zero or negative (INT32_MIN, say) is copied with assign(buffer, length - 1): a read of about
+// 2^31 bytes past the buffer, which kills the process with one 23-byte packet. An array count is
+// used to resize a vector before the buffer is checked to hold that many elements: one corrupt
+// count allocates gigabytes. So every type slamd or its clients can decode is walked here, field
+// by field, through its whole encoding: every string length must be at least 1 (the terminating
+// NUL) and fit, with no NUL before its end; every array must fit; and the walk must end exactly
+// at the end of the buffer. What passes is an encoding lcm-gen's encoder could have written.
+// Only then does the generated decoder run. There is no default: decoding a type that has no
+// walker below does not compile.
+//
+// Encodings (big-endian, as lcm-gen writes them): a top-level message starts with its 8-byte type
+// hash; nested structs are encoded without one.
 
 #include <cstdint>
 #include <cstring>
 #include <string>
 
 #include "bot_core/pose_t.hpp"
+#include "kinect/depth_msg_t.hpp"
 #include "kinect/frame_msg_t.hpp"
+#include "kinect/image_msg_t.hpp"
+#include "slamd/command_t.hpp"
+#include "slamd/keyframe_pose_t.hpp"
 #include "slamd/keyframe_trajectory_t.hpp"
+#include "slamd/odometry_t.hpp"
+#include "slamd/pose_t.hpp"
 #include "slamd/rgbd_frame_t.hpp"
+#include "slamd/stage_status_t.hpp"
 #include "slamd/status_t.hpp"
+#include "slamd/vanishing_point_t.hpp"
 #include "slamd/voxel_map_t.hpp"
 #include "slamd/voxel_map_update_t.hpp"
+#include "slamd/voxel_t.hpp"
 
 namespace slamd {
 
@@ -26,7 +42,7 @@ namespace slamd {
 class LcmFieldWalker {
  public:
   LcmFieldWalker(const void* data, std::size_t size)
-      : data_(static_cast<const std::uint8_t*>(data)), size_(size) {}
+      : data_(static_cast<const std::uint8_t*>(data)), size_(data == nullptr ? 0 : size) {}
 
   bool skip(std::size_t bytes) {
     if (bytes > size_ - pos_) return fail();
@@ -41,24 +57,32 @@ class LcmFieldWalker {
     pos_ += 4;
     return true;
   }
-  bool readInt16(std::int16_t& value) {
-    if (2 > size_ - pos_) return fail();
-    value = static_cast<std::int16_t>((data_[pos_] << 8) | data_[pos_ + 1]);
-    pos_ += 2;
-    return true;
-  }
-  /// An LCM string: int32 length (including the terminating NUL) then the bytes.
+  /// An LCM string: int32 length including the terminating NUL (so at least 1), then the bytes,
+  /// NUL only at the end (what the encoder writes: it measures strings with strlen).
   bool skipString() {
     std::int32_t length = 0;
-    return readInt32(length) && length >= 0 && skip(static_cast<std::size_t>(length));
+    if (!readInt32(length)) return false;
+    if (length < 1 || static_cast<std::size_t>(length) > size_ - pos_) return fail();
+    const std::uint8_t* text = data_ + pos_;
+    const auto last = static_cast<std::size_t>(length) - 1;
+    if (text[last] != 0 || std::memchr(text, 0, last) != nullptr) return fail();
+    pos_ += static_cast<std::size_t>(length);
+    return true;
   }
-  /// A count of elements each taking at least `min_element_bytes` in the encoding.
+  /// An int32 count of elements that each take at least `min_element_bytes`; fails when the rest
+  /// of the buffer cannot hold them.
   bool readCount(std::int32_t& count, std::size_t min_element_bytes) {
     if (!readInt32(count)) return false;
     if (count < 0) return fail();
     if (static_cast<std::size_t>(count) * min_element_bytes > size_ - pos_) return fail();
     return true;
   }
+  /// A count followed by that many bytes (a `byte data[count]` field).
+  bool skipByteArray() {
+    std::int32_t count = 0;
+    return readCount(count, 1) && skip(static_cast<std::size_t>(count));
+  }
+  bool atEnd() const { return ok_ && pos_ == size_; }
   bool ok() const { return ok_; }
 
  private:
@@ -72,76 +96,195 @@ class LcmFieldWalker {
   bool ok_ = true;
 };
 
+/// The walker of one type: `static bool walk(LcmFieldWalker&)` over its fields (no hash). Every
+/// decodable type has a specialisation; the primary template is never defined.
 template <typename Message>
-struct MessagePrecheck {
-  static bool plausible(const void*, std::size_t) { return true; }
-};
+struct LcmLayout;
+
+/// True when `data` holds exactly one well-formed encoding of `Message`, hash included (the hash
+/// value itself is checked by the decoder).
+template <typename Message>
+bool plausibleEncoding(const void* data, std::size_t size) {
+  LcmFieldWalker walker(data, size);
+  return walker.skip(8) && LcmLayout<Message>::walk(walker) && walker.atEnd();
+}
+
+// Byte counts of fixed-size fields.
+namespace lcm_bytes {
+constexpr std::size_t kInt8 = 1;
+constexpr std::size_t kInt16 = 2;
+constexpr std::size_t kInt32 = 4;
+constexpr std::size_t kFloat = 4;
+constexpr std::size_t kInt64 = 8;
+constexpr std::size_t kDouble = 8;
+}  // namespace lcm_bytes
 
 template <>
-struct MessagePrecheck<slamd::rgbd_frame_t> {
-  static bool plausible(const void* data, std::size_t size) {
-    LcmFieldWalker w(data, size);
-    std::int32_t count = 0;
-    // hash, utime, sequence, frame_id, fx fy cx cy, width height, distortion_model,
-    // distortion[5], depth_scale, color_encoding, color_nbytes, color_data, depth_encoding, ...
-    return w.skip(8 + 8 + 8) && w.skipString() && w.skip(4 * 8 + 2 * 4 + 1 + 5 * 8 + 8 + 1) &&
-           w.readCount(count, 1) && w.skip(static_cast<std::size_t>(count)) && w.skip(1) &&
-           w.readCount(count, 1);
+struct LcmLayout<bot_core::pose_t> {
+  static bool walk(LcmFieldWalker& w) {
+    using namespace lcm_bytes;
+    // utime; pos[3], vel[3], orientation[4], rotation_rate[3], accel[3]
+    return w.skip(kInt64 + 16 * kDouble);
   }
 };
 
 template <>
-struct MessagePrecheck<slamd::voxel_map_t> {
-  static bool plausible(const void* data, std::size_t size) {
-    LcmFieldWalker w(data, size);
-    std::int32_t count = 0;
-    // hash, utime, resolution, frame_id, update_sequence, num_bytes
-    return w.skip(8 + 8 + 8) && w.skipString() && w.skip(8) && w.readCount(count, 1);
+struct LcmLayout<kinect::image_msg_t> {
+  static bool walk(LcmFieldWalker& w) {
+    using namespace lcm_bytes;
+    // timestamp, width, height, image_data_nbytes + image_data, image_data_format
+    return w.skip(kInt64 + 2 * kInt16) && w.skipByteArray() && w.skip(kInt8);
   }
 };
 
 template <>
-struct MessagePrecheck<slamd::voxel_map_update_t> {
-  static bool plausible(const void* data, std::size_t size) {
-    LcmFieldWalker w(data, size);
-    std::int32_t count = 0;
-    // hash, utime, resolution, frame_id, sequence, num_voxels of 16-byte voxel_t
-    return w.skip(8 + 8 + 8) && w.skipString() && w.skip(8) && w.readCount(count, 16);
+struct LcmLayout<kinect::depth_msg_t> {
+  static bool walk(LcmFieldWalker& w) {
+    using namespace lcm_bytes;
+    // timestamp, width, height, depth_data_nbytes + depth_data, depth_data_format, compression,
+    // uncompressed_size
+    return w.skip(kInt64 + 2 * kInt16) && w.skipByteArray() && w.skip(2 * kInt8 + kInt32);
   }
 };
 
 template <>
-struct MessagePrecheck<slamd::status_t> {
-  static bool plausible(const void* data, std::size_t size) {
-    LcmFieldWalker w(data, size);
-    std::int32_t count = 0;
-    // hash, utime, num_stages; each stage_status_t is at least a 4-byte name length + 76 bytes
-    return w.skip(8 + 8) && w.readCount(count, 4 + 5 * 8 + 2 * 4 + 3 * 8);
+struct LcmLayout<kinect::frame_msg_t> {
+  static bool walk(LcmFieldWalker& w) {
+    return w.skip(lcm_bytes::kInt64) && LcmLayout<kinect::image_msg_t>::walk(w) &&
+           LcmLayout<kinect::depth_msg_t>::walk(w);
   }
 };
 
 template <>
-struct MessagePrecheck<slamd::keyframe_trajectory_t> {
-  static bool plausible(const void* data, std::size_t size) {
-    LcmFieldWalker w(data, size);
-    std::int32_t count = 0;
-    // hash, utime, sequence, frame_id, correction (3 + 4 doubles), num_loops,
-    // num_relocalizations, optimization_ms, num_keyframes of 80-byte keyframe_pose_t
-    return w.skip(8 + 8 + 8) && w.skipString() && w.skip(7 * 8 + 4 + 4 + 4) &&
-           w.readCount(count, 3 * 8 + 7 * 8);
+struct LcmLayout<slamd::command_t> {
+  static bool walk(LcmFieldWalker& w) {
+    using namespace lcm_bytes;
+    // utime, command, argument
+    return w.skip(kInt64 + kInt8) && w.skipString();
   }
 };
 
 template <>
-struct MessagePrecheck<kinect::frame_msg_t> {
-  static bool plausible(const void* data, std::size_t size) {
-    LcmFieldWalker w(data, size);
+struct LcmLayout<slamd::keyframe_pose_t> {
+  static constexpr std::size_t kBytes = 3 * lcm_bytes::kInt64 + 7 * lcm_bytes::kDouble;
+  static bool walk(LcmFieldWalker& w) {
+    // keyframe_id, utime, segment, position[3], orientation[4]
+    return w.skip(kBytes);
+  }
+};
+
+template <>
+struct LcmLayout<slamd::keyframe_trajectory_t> {
+  static bool walk(LcmFieldWalker& w) {
+    using namespace lcm_bytes;
     std::int32_t count = 0;
-    // hash, timestamp; image: timestamp, width, height, nbytes, data, format;
-    // depth: timestamp, width, height, nbytes, data, ...
-    return w.skip(8 + 8) && w.skip(8 + 2 + 2) && w.readCount(count, 1) &&
-           w.skip(static_cast<std::size_t>(count)) && w.skip(1) && w.skip(8 + 2 + 2) &&
-           w.readCount(count, 1);
+    // utime, sequence, frame_id, correction_position[3], correction_orientation[4], num_loops,
+    // num_relocalizations, optimization_ms, num_keyframes + keyframes
+    return w.skip(2 * kInt64) && w.skipString() && w.skip(7 * kDouble + 2 * kInt32 + kFloat) &&
+           w.readCount(count, LcmLayout<slamd::keyframe_pose_t>::kBytes) &&
+           w.skip(static_cast<std::size_t>(count) * LcmLayout<slamd::keyframe_pose_t>::kBytes);
+  }
+};
+
+template <>
+struct LcmLayout<slamd::odometry_t> {
+  static bool walk(LcmFieldWalker& w) {
+    using namespace lcm_bytes;
+    // utime, prev_utime, translation[3], rotation[4], covariance[36], status, num_features,
+    // num_matches, num_inliers, reprojection_error_px, is_keyframe, reference_keyframe_id
+    return w.skip(2 * kInt64 + 43 * kDouble + kInt8 + 3 * kInt32 + kDouble + kInt8 + kInt64);
+  }
+};
+
+template <>
+struct LcmLayout<slamd::pose_t> {
+  static bool walk(LcmFieldWalker& w) {
+    using namespace lcm_bytes;
+    // utime, sequence, parent_frame, child_frame, position[3], orientation[4], covariance[36],
+    // linear_velocity[3], angular_velocity[3], tracking_state, source
+    return w.skip(2 * kInt64) && w.skipString() && w.skipString() &&
+           w.skip(49 * kDouble + 2 * kInt8);
+  }
+};
+
+template <>
+struct LcmLayout<slamd::rgbd_frame_t> {
+  static bool walk(LcmFieldWalker& w) {
+    using namespace lcm_bytes;
+    // utime, sequence, frame_id, fx fy cx cy, width, height, distortion_model, distortion[5],
+    // depth_scale, color_encoding, color_nbytes + color_data, depth_encoding,
+    // depth_nbytes + depth_data
+    return w.skip(2 * kInt64) && w.skipString() &&
+           w.skip(4 * kDouble + 2 * kInt32 + kInt8 + 5 * kDouble + kDouble + kInt8) &&
+           w.skipByteArray() && w.skip(kInt8) && w.skipByteArray();
+  }
+};
+
+template <>
+struct LcmLayout<slamd::stage_status_t> {
+  /// The name's length field and NUL, then the fixed fields.
+  static constexpr std::size_t kMinBytes =
+      lcm_bytes::kInt32 + 1 + 4 * lcm_bytes::kDouble + 2 * lcm_bytes::kInt32 + 3 * lcm_bytes::kInt64;
+  static bool walk(LcmFieldWalker& w) {
+    using namespace lcm_bytes;
+    // name, rate_hz, latency_p50/p95/p99_ms, queue_depth, queue_capacity, drops, errors,
+    // processed
+    return w.skipString() && w.skip(4 * kDouble + 2 * kInt32 + 3 * kInt64);
+  }
+};
+
+template <>
+struct LcmLayout<slamd::status_t> {
+  static bool walk(LcmFieldWalker& w) {
+    using namespace lcm_bytes;
+    std::int32_t count = 0;
+    // utime, num_stages + stages, end_to_end_p50/p95/p99_ms, tracking_state,
+    // map_occupied_voxels, map_total_voxels, num_keyframes, num_loops, num_relocalizations,
+    // message
+    if (!(w.skip(kInt64) && w.readCount(count, LcmLayout<slamd::stage_status_t>::kMinBytes))) {
+      return false;
+    }
+    for (std::int32_t i = 0; i < count; ++i) {
+      if (!LcmLayout<slamd::stage_status_t>::walk(w)) return false;
+    }
+    return w.skip(3 * kDouble + kInt8 + 2 * kInt64 + 3 * kInt32) && w.skipString();
+  }
+};
+
+template <>
+struct LcmLayout<slamd::vanishing_point_t> {
+  static bool walk(LcmFieldWalker& w) {
+    using namespace lcm_bytes;
+    // utime, pixel[2], pixel_covariance[4], direction_camera[3], num_supporting_lines,
+    // landmark_id, accepted, mahalanobis_distance_sq
+    return w.skip(kInt64 + 9 * kDouble + 2 * kInt32 + kInt8 + kDouble);
+  }
+};
+
+template <>
+struct LcmLayout<slamd::voxel_t> {
+  static constexpr std::size_t kBytes = 4 * lcm_bytes::kFloat;
+  static bool walk(LcmFieldWalker& w) { return w.skip(kBytes); }  // center[3], log_odds
+};
+
+template <>
+struct LcmLayout<slamd::voxel_map_t> {
+  static bool walk(LcmFieldWalker& w) {
+    using namespace lcm_bytes;
+    // utime, resolution, frame_id, update_sequence, num_bytes + data
+    return w.skip(kInt64 + kDouble) && w.skipString() && w.skip(kInt64) && w.skipByteArray();
+  }
+};
+
+template <>
+struct LcmLayout<slamd::voxel_map_update_t> {
+  static bool walk(LcmFieldWalker& w) {
+    using namespace lcm_bytes;
+    std::int32_t count = 0;
+    // utime, resolution, frame_id, sequence, num_voxels + voxels
+    return w.skip(kInt64 + kDouble) && w.skipString() && w.skip(kInt64) &&
+           w.readCount(count, LcmLayout<slamd::voxel_t>::kBytes) &&
+           w.skip(static_cast<std::size_t>(count) * LcmLayout<slamd::voxel_t>::kBytes);
   }
 };
 

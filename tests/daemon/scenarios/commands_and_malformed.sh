@@ -16,12 +16,21 @@ wait_for 20 "slamd to publish status" "$SLAMD_BIN/slamd-status" --once --timeout
 PLAY_PID=$!
 wait_for 60 "10 poses" has_poses poses.txt 10
 
+"$SLAMD_BIN/slamd-status" --log-level warn > status-watch.txt 2>&1 &
+STATUS_PID=$!
 "$SLAMD_BIN/slamd-test-inject" SLAMD_COMMAND 30 1
 "$SLAMD_BIN/slamd-test-inject" SLAMD_FRAMES 30 2
+# Every fourth message is a string length of INT32_MIN: once a SIGSEGV in slamd (on
+# SLAMD_COMMAND), slamd-pose-log (SLAMD_POSE) and slamd-status (SLAMD_STATUS).
+"$SLAMD_BIN/slamd-test-inject" SLAMD_POSE 8 3
+"$SLAMD_BIN/slamd-test-inject" SLAMD_STATUS 8 4
 before=$(count_poses poses.txt)
 wait_for 30 "poses after the garbage" has_poses poses.txt $((before + 20))
 kill -0 $SLAMD_PID || fail "slamd died after malformed messages"
-check "slamd kept tracking after 60 malformed messages"
+kill -0 $POSE_LOG_PID || fail "slamd-pose-log died after malformed messages"
+kill -0 $STATUS_PID || fail "slamd-status died after malformed messages"
+stop_process $STATUS_PID
+check "slamd kept tracking after 60 malformed messages; slamd-pose-log and slamd-status survived 8 each"
 # Every malformed frame is counted: rejected by the decoder (capture errors) or, when a burst
 # overflows the source's receive queue before decoding, dropped (capture drops). Status is 1 Hz.
 capture_counted() {
