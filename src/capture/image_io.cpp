@@ -4,6 +4,7 @@
 
 #include <csetjmp>
 #include <cstdio>
+#include <filesystem>
 #include <fstream>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -97,6 +98,22 @@ cv::Mat decodeUnchanged(const std::uint8_t* data, std::size_t size, std::string&
 }  // namespace
 
 bool readFileBytes(const std::string& path, std::vector<std::uint8_t>& bytes, std::string& error) {
+  // Only regular files: a FIFO would block the reader forever and a directory "opens" with an
+  // absurd size. The check follows symbolic links, as opening does.
+  std::error_code status_error;
+  const auto status = std::filesystem::status(path, status_error);
+  if (status_error) {
+    error = "cannot open " + path + ": " + status_error.message();
+    return false;
+  }
+  if (status.type() != std::filesystem::file_type::regular) {
+    error = path + " is not a regular file (" +
+            (status.type() == std::filesystem::file_type::directory ? std::string("a directory")
+             : status.type() == std::filesystem::file_type::fifo    ? std::string("a FIFO")
+                                                                    : std::string("a special file")) +
+            ")";
+    return false;
+  }
   std::ifstream in(path, std::ios::binary | std::ios::ate);
   if (!in) {
     error = "cannot open " + path;

@@ -14,12 +14,19 @@ sigset_t shutdownSignalSet() {
   sigemptyset(&set);
   sigaddset(&set, SIGINT);
   sigaddset(&set, SIGTERM);
+  // A closed terminal and a stray user signal end the run in order too, with outputs written,
+  // instead of the default termination.
+  sigaddset(&set, SIGHUP);
+  sigaddset(&set, SIGUSR1);
   sigaddset(&set, SIGUSR2);  // internal: wakes the waiting thread at destruction
   return set;
 }
 }  // namespace
 
 ShutdownSignals::ShutdownSignals() {
+  // A reader that goes away (`slamd ... 2>&1 | head -1`) must not kill the process: writes to a
+  // closed pipe fail with EPIPE instead, and logging carries on without them.
+  signal(SIGPIPE, SIG_IGN);
   const sigset_t set = shutdownSignalSet();
   pthread_sigmask(SIG_BLOCK, &set, nullptr);
   thread_ = std::thread([this] { run(); });

@@ -1,4 +1,5 @@
 #include <gtest/gtest.h>
+#include <sys/stat.h>
 
 #include <filesystem>
 #include <fstream>
@@ -139,6 +140,24 @@ TEST(TumBadInput, EmptyImageFileIsSkipped) {
   const std::string path = imagePath(folder, "rgb", 1, ".png");
   std::ofstream(path, std::ios::trunc).close();
   expectOneSkip(folder, path, "empty");
+}
+
+TEST(TumBadInput, ImagePathThatIsAFifoIsSkippedWithoutBlocking) {
+  // Hostile-input issue, row 8: a FIFO in rgb.txt hung the capture thread (and SIGTERM) forever.
+  const auto folder = test::writeTumFolder("tum-fifo", 3, false);
+  const std::string path = imagePath(folder, "rgb", 1, ".png");
+  fs::remove(path);
+  ASSERT_EQ(mkfifo(path.c_str(), 0600), 0);
+  expectOneSkip(folder, path, "not a regular file (a FIFO)");
+}
+
+TEST(TumBadInput, ImagePathThatIsADirectoryIsSkippedNamingIt) {
+  // Row 8: a directory gave only "std::bad_alloc".
+  const auto folder = test::writeTumFolder("tum-dir", 3, false);
+  const std::string path = imagePath(folder, "depth", 1, ".png");
+  fs::remove(path);
+  fs::create_directory(path);
+  expectOneSkip(folder, path, "not a regular file (a directory)");
 }
 
 TEST(TumBadInput, MissingImageFileIsSkipped) {

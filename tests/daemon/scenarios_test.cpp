@@ -70,5 +70,10 @@ TEST_F(DaemonScenario, MalformedMessagesAreCountedAndSaveMapWorksWhileRunning) {
   EXPECT_EQ(run("commands_and_malformed", &log), 0) << log;
 }
 
+TEST_F(DaemonScenario, HangupUser1AndAClosedLogPipeStillWriteEverything) {
+  std::string log;
+  EXPECT_EQ(run("signals_and_pipes", &log), 0) << log;
+}
+
 }  // namespace
 }  // namespace slamd

@@ -1,9 +1,10 @@
 #pragma once
-// ShutdownSignals: turns SIGINT/SIGTERM into an orderly shutdown request.
+// ShutdownSignals: turns SIGINT, SIGTERM, SIGHUP and SIGUSR1 into an orderly shutdown request,
+// and ignores SIGPIPE (a closed log pipe makes writes fail, not the process die).
 //
-// Construct it first thing in main(), before any other thread starts: it blocks SIGINT and
-// SIGTERM in the calling thread (new threads inherit the mask) and waits for them on a dedicated
-// thread with sigwait(), so no handler ever runs in the middle of another thread's work.
+// Construct it first thing in main(), before any other thread starts: it blocks those signals in
+// the calling thread (new threads inherit the mask) and waits for them on a dedicated thread with
+// sigwait(), so no handler ever runs in the middle of another thread's work.
 // The first signal sets requested() and wakes waitFor(); a second signal means the user insists:
 // the process exits at once with kExitForced (skipping the drain and saves).
 //
