@@ -26,6 +26,7 @@ DaemonConfig DaemonConfig::load(Config& config) {
   c.mapping_enabled = config.getBool("mapping.enabled", c.mapping_enabled);
   c.map_keyframes_only = config.getBool("mapping.keyframes_only", c.map_keyframes_only);
   c.map_save_path = config.getString("daemon.map_save_path", c.map_save_path);
+  c.save_dir = config.getString("daemon.save_dir", c.save_dir);
   c.mapping_nice = config.getInt("daemon.mapping_nice", c.mapping_nice, 0, 19);
   c.backend_nice = config.getInt("daemon.backend_nice", c.backend_nice, 0, 19);
   c.opencv_threads = config.getInt("daemon.opencv_threads", c.opencv_threads, 0, 64);

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <filesystem>
 #include <fstream>
 #include <mutex>
 #include <sstream>
@@ -11,6 +12,7 @@
 #include <opencv2/core.hpp>
 
 #include "slamd/app/backend_stage.hpp"
+#include "slamd/app/command_save_path.hpp"
 #include "slamd/app/daemon_config.hpp"
 #include "slamd/app/daemon_messages.hpp"
 #include "slamd/app/pose_estimator.hpp"
@@ -181,6 +183,8 @@ struct SlamDaemon::Impl {
   /// Commands from the LCM receive thread (producer) to the control loop (consumer).
   SpscQueue<slamd::command_t> commands{kCommandQueueCapacity};
   std::atomic<std::uint64_t> commands_dropped{0};
+  /// Commands refused by the control loop (a SAVE_MAP path outside daemon.save_dir).
+  std::atomic<std::uint64_t> commands_refused{0};
 
   /// Capture-to-publication latency, recorded by the publish thread.
   LatencyHistogram end_to_end;
@@ -276,9 +280,21 @@ void SlamDaemon::Impl::handleCommands(ShutdownSignals& signals) {
         MapRequest request;
         request.kind = command->command == slamd::command_t::SAVE_MAP ? MapRequest::Kind::kSave
                                                                        : MapRequest::Kind::kPublish;
-        request.path = !command->argument.empty() ? command->argument
-                       : !daemon.map_out.empty()  ? daemon.map_out
-                                                  : daemon.map_save_path;
+        request.path = !daemon.map_out.empty() ? daemon.map_out : daemon.map_save_path;
+        if (request.kind == MapRequest::Kind::kSave && !command->argument.empty()) {
+          // The file named by a peer on the network: confined to daemon.save_dir.
+          std::string error;
+          const std::optional<std::string> path =
+              resolveCommandSavePath(command->argument, daemon.save_dir, error);
+          if (!path) {
+            commands_refused.fetch_add(1, std::memory_order_relaxed);
+            SLAMD_LOG_WARN(kLog) << error;
+            break;
+          }
+          std::error_code ignored;
+          std::filesystem::create_directories(daemon.save_dir, ignored);
+          request.path = *path;
+        }
         SLAMD_LOG_INFO(kLog) << "command "
                              << (request.kind == MapRequest::Kind::kSave ? "SAVE_MAP " + request.path
                                                                          : std::string("PUBLISH_MAP"));
@@ -313,6 +329,11 @@ void SlamDaemon::Impl::publishStatus(LcmBus& bus, StatusBuilder& builder, Pipeli
   extras.message = note;
   const std::string loss = tracking_tally.lossNote();
   if (!loss.empty()) extras.message += (extras.message.empty() ? "" : "; ") + loss;
+  if (commands_refused.load(std::memory_order_relaxed) > 0) {
+    extras.message += (extras.message.empty() ? "" : "; ") +
+                      std::to_string(commands_refused.load(std::memory_order_relaxed)) +
+                      " commands refused";
+  }
   if (source_stats.frames_behind_schedule > 0) {
     extras.message += (extras.message.empty() ? "" : "; ") +
                       std::to_string(source_stats.frames_behind_schedule) +
@@ -612,6 +633,12 @@ int SlamDaemon::Impl::run(ShutdownSignals& signals) {
   summary.longest_loss_s = tracking_tally.longest_loss_s;
   summary.tracking_lost_at_end = tracking_tally.loss_start_utime.load() >= 0;
   summary.malformed_commands = bus->malformedCount(channels.command);
+  summary.commands_refused = commands_refused.load();
+  if (summary.commands_refused > 0) {
+    SLAMD_LOG_WARN(kLog) << "commands: " << summary.commands_refused
+                         << " refused (SAVE_MAP outside daemon.save_dir " << daemon.save_dir
+                         << ")";
+  }
   summary.duration_s = static_cast<double>(steadyNowNs() - start_ns) * 1e-9;
   const LatencySummary latency = end_to_end.summary();
   summary.end_to_end_p50_ms = latency.p50_ms;

@@ -66,6 +66,10 @@ struct DaemonConfig {
   /// daemon.map_save_path (path, default "slamd_map.bt"): where SAVE_MAP writes when the command
   /// names no file and no --map-out was given.
   std::string map_save_path = "slamd_map.bt";
+  /// daemon.save_dir (folder, default "maps", relative to the working directory; created when
+  /// first needed): the only folder a SAVE_MAP command received over LCM may name a file in
+  /// (see command_save_path.hpp). Empty: commands may not name files at all.
+  std::string save_dir = "maps";
   /// daemon.mapping_nice (int, default 10, 0..19): niceness of the mapping thread. Mapping is off
   /// the capture-to-pose path, so it gets the CPU the latency-critical stages leave.
   int mapping_nice = 10;

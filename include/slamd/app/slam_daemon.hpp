@@ -53,6 +53,7 @@ struct DaemonSummary {
   std::uint64_t drops = 0;
   std::uint64_t errors = 0;
   std::uint64_t malformed_commands = 0;
+  std::uint64_t commands_refused = 0;  ///< SAVE_MAP naming a file outside daemon.save_dir
   // Back end (zero when backend.enabled is false).
   std::int64_t keyframes = 0;
   std::int64_t loops = 0;

@@ -5,8 +5,10 @@ source "$(dirname "$0")/lib.sh"
 private_network
 cd "$WORK"
 start_pose_log poses.txt
+mkdir -p maps
 "$SLAMD_BIN/slamd" --config "$SLAMD_SOURCE_DIR/config/synthetic.yaml" --log-level warn \
-  "${SMALL_CAMERA[@]}" --source lcm:SLAMD_FRAMES --trajectory-out trajectory.txt &
+  "${SMALL_CAMERA[@]}" --source lcm:SLAMD_FRAMES --trajectory-out trajectory.txt \
+  --set daemon.save_dir="$WORK/maps" &
 SLAMD_PID=$!
 wait_for 20 "slamd to publish status" "$SLAMD_BIN/slamd-status" --once --timeout 1 --log-level error
 # A frame feeder: slamd-play republishes a synthetic sequence at 15 Hz on SLAMD_FRAMES.
@@ -44,11 +46,26 @@ capture_counted() {
 wait_for 20 "status to count the 30 malformed commands and 30 malformed frames" capture_counted
 check "status counts them: $(grep -o '[0-9]* malformed[a-z ]*' status.txt | head -1); capture errors $(awk '$1 == "capture" { print $8 }' status.txt), drops $(awk '$1 == "capture" { print $7 }' status.txt)"
 
-"$SLAMD_BIN/slamd-cmd" --log-level error save-map "$WORK/live.bt"
-wait_for 20 "live.bt to be written" test -s "$WORK/live.bt"
+"$SLAMD_BIN/slamd-cmd" --log-level error save-map "$WORK/maps/live.bt"
+"$SLAMD_BIN/slamd-cmd" --log-level error save-map named.bt
+wait_for 20 "maps/live.bt and maps/named.bt to be written" \
+  bash -c "test -s '$WORK/maps/live.bt' && test -s '$WORK/maps/named.bt'"
 kill -0 $SLAMD_PID || fail "slamd stopped after SAVE_MAP"
-convert_octree live.bt live_check.ot > /dev/null || fail "live.bt does not load"
-check "SAVE_MAP wrote a loadable map while slamd keeps running"
+convert_octree maps/live.bt live_check.ot > /dev/null || fail "live.bt does not load"
+check "SAVE_MAP wrote loadable maps into daemon.save_dir while slamd keeps running"
+
+# Paths outside daemon.save_dir are refused, counted and logged; nothing is written.
+for path in "$WORK/escape.bt" ../escape2.bt /etc/slamd-escape.bt; do
+  "$SLAMD_BIN/slamd-cmd" --log-level error save-map "$path"
+done
+refused() {
+  "$SLAMD_BIN/slamd-status" --once --timeout 3 --log-level error > status.txt
+  grep -q "3 commands refused" status.txt
+}
+wait_for 20 "status to count 3 refused commands" refused
+[ ! -e "$WORK/escape.bt" ] && [ ! -e "$WORK/../escape2.bt" ] && [ ! -e /etc/slamd-escape.bt ] ||
+  fail "a refused SAVE_MAP wrote a file"
+check "SAVE_MAP outside daemon.save_dir: 3 refused, counted on SLAMD_STATUS, nothing written"
 
 stop_process $PLAY_PID
 kill -INT $SLAMD_PID
