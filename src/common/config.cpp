@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <filesystem>
 #include <fstream>
 #include <sstream>
 
@@ -19,6 +20,41 @@ std::string trim(const std::string& text) {
   if (begin == std::string::npos) return "";
   const auto end = text.find_last_not_of(" \t\r\n");
   return text.substr(begin, end - begin + 1);
+}
+
+// Bounds on configuration text, far above any real configuration (slamd's own files are a few
+// kB, three levels deep): OpenCV's YAML parser recurses once per level and would overflow the
+// stack on a file nested 50,000 deep.
+constexpr std::size_t kMaxConfigBytes = 1 << 20;
+constexpr int kMaxConfigNesting = 64;
+
+/// Largest nesting of the YAML text: per line, its indentation, plus the block sequences opened
+/// on it ("- - x"), plus the flow collections still open ('[', '{'). An over-estimate of the real
+/// nesting, which is all a bound needs.
+int yamlNestingEstimate(const std::string& text) {
+  int deepest = 0;
+  int flow = 0;
+  std::size_t line_start = 0;
+  while (line_start < text.size()) {
+    std::size_t line_end = text.find('\n', line_start);
+    if (line_end == std::string::npos) line_end = text.size();
+    std::size_t i = line_start;
+    while (i < line_end && (text[i] == ' ' || text[i] == '\t')) ++i;
+    int depth = static_cast<int>(i - line_start);
+    while (i + 1 < line_end && text[i] == '-' && text[i + 1] == ' ') {
+      depth += 2;
+      i += 2;
+      while (i < line_end && text[i] == ' ') ++i;
+    }
+    for (; i < line_end; ++i) {
+      if (text[i] == '#') break;
+      if (text[i] == '[' || text[i] == '{') deepest = std::max(deepest, depth + ++flow);
+      if ((text[i] == ']' || text[i] == '}') && flow > 0) --flow;
+    }
+    deepest = std::max(deepest, depth + flow);
+    line_start = line_end + 1;
+  }
+  return deepest;
 }
 
 // Shortest text that reads back as the same double.
@@ -105,12 +141,31 @@ Config parseStorage(cv::FileStorage& storage) {
 }  // namespace
 
 Config Config::fromFile(const std::string& path) {
-  std::ifstream file(path);
+  // Only a regular file of bounded size: a directory would read as empty (silently all defaults),
+  // /dev/zero or a FIFO would be read forever.
+  std::error_code error;
+  const auto status = std::filesystem::status(path, error);
+  if (error) {
+    throw ConfigError("cannot open configuration file '" + path + "': " + error.message());
+  }
+  if (status.type() != std::filesystem::file_type::regular) {
+    throw ConfigError("configuration file '" + path + "' is not a regular file (" +
+                      (status.type() == std::filesystem::file_type::directory ? "a directory"
+                                                                               : "a device, FIFO "
+                                                                                 "or socket") +
+                      ")");
+  }
+  std::ifstream file(path, std::ios::binary);
   if (!file) throw ConfigError("cannot open configuration file '" + path + "'");
-  std::stringstream text;
-  text << file.rdbuf();
+  std::string text(kMaxConfigBytes + 1, '\0');
+  file.read(text.data(), static_cast<std::streamsize>(text.size()));
+  text.resize(static_cast<std::size_t>(file.gcount()));
+  if (text.size() > kMaxConfigBytes) {
+    throw ConfigError("configuration file '" + path + "' is larger than " +
+                      std::to_string(kMaxConfigBytes / 1024) + " kB");
+  }
   try {
-    Config config = fromYamlString(text.str());
+    Config config = fromYamlString(text);
     config.origin_ = path;
     return config;
   } catch (const ConfigError& e) {
@@ -119,6 +174,14 @@ Config Config::fromFile(const std::string& path) {
 }
 
 Config Config::fromYamlString(const std::string& yaml_text) {
+  if (yaml_text.size() > kMaxConfigBytes) {
+    throw ConfigError("configuration text is larger than " +
+                      std::to_string(kMaxConfigBytes / 1024) + " kB");
+  }
+  if (yamlNestingEstimate(yaml_text) > kMaxConfigNesting) {
+    throw ConfigError("configuration text is nested more than " +
+                      std::to_string(kMaxConfigNesting) + " levels deep");
+  }
   cv::FileStorage storage;
   std::string text = yaml_text;
   // cv::FileStorage recognises YAML in memory by its directive.

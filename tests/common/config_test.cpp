@@ -1,6 +1,8 @@
 #include <gtest/gtest.h>
 
+#include <filesystem>
 #include <fstream>
+#include <utility>
 
 #include "slamd/common/config.hpp"
 #include "test_data.hpp"
@@ -45,6 +47,49 @@ TEST(Config, ReadsAFile) {
   Config config = Config::fromFile(path.string());
   EXPECT_EQ(config.getInt("tracking.max_features", 1000, 10, 10000), 800);
   EXPECT_EQ(config.origin(), path.string());
+}
+
+// Hostile-input issue, row 7: a file nested 50,000 deep crashed the parser (SIGSEGV), /dev/zero
+// grew memory without bound, and a directory ran silently on defaults with exit 0.
+TEST(Config, DeeplyNestedYamlIsAConfigErrorNotACrash) {
+  const auto dir = test::makeTempDir("config-nested");
+  std::string indented = "a:\n";
+  for (int level = 1; indented.size() < 900000; ++level) {
+    indented += std::string(static_cast<std::size_t>(level), ' ') + "b:\n";
+  }
+  const std::string flow = "a: " + std::string(50000, '[') + std::string(50000, ']') + "\n";
+  std::string dashes = "a:\n";
+  for (int level = 0; level < 50000; ++level) dashes += "- ";
+  dashes += "x\n";
+  for (const auto& [name, text] :
+       {std::pair<std::string, std::string>{"indented", indented}, {"flow", flow},
+        {"dashes", dashes}}) {
+    const auto path = dir / (name + ".yaml");
+    std::ofstream(path) << text;
+    try {
+      Config::fromFile(path.string());
+      ADD_FAILURE() << name << ": no error";
+    } catch (const ConfigError& e) {
+      EXPECT_NE(std::string(e.what()).find("nested more than 64"), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find(path.string()), std::string::npos) << e.what();
+    }
+  }
+  std::filesystem::remove_all(dir);
+}
+
+TEST(Config, ADeviceADirectoryOrAHugeFileIsRefusedNamingIt) {
+  const auto dir = test::makeTempDir("config-special");
+  const auto huge = dir / "huge.yaml";
+  std::ofstream(huge) << "# " << std::string(2 << 20, 'x') << "\n";
+  for (const std::string& path : {std::string("/dev/zero"), dir.string(), huge.string()}) {
+    try {
+      Config::fromFile(path);
+      ADD_FAILURE() << path << ": no error";
+    } catch (const ConfigError& e) {
+      EXPECT_NE(std::string(e.what()).find(path), std::string::npos) << e.what();
+    }
+  }
+  std::filesystem::remove_all(dir);
 }
 
 TEST(Config, ReadsAFileWithoutYamlDirective) {

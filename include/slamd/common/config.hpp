@@ -33,7 +33,8 @@ class Config {
  public:
   Config() = default;
 
-  /// Reads a YAML file (with or without the "%YAML:1.0" directive cv::FileStorage wants).
+  /// Reads a YAML file (with or without the "%YAML:1.0" directive cv::FileStorage wants): a
+  /// regular file of at most 1 MB, nested at most 64 levels (ConfigError otherwise).
   static Config fromFile(const std::string& path);
   /// Reads YAML text (for tests and embedded defaults).
   static Config fromYamlString(const std::string& yaml_text);
