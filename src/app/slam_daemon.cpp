@@ -17,6 +17,7 @@
 #include "slamd/app/daemon_messages.hpp"
 #include "slamd/app/pose_estimator.hpp"
 #include "slamd/command_t.hpp"
+#include "slamd/common/file_io.hpp"
 #include "slamd/common/log.hpp"
 #include "slamd/common/program_options.hpp"
 #include "slamd/common/trajectory.hpp"
@@ -203,6 +204,7 @@ struct SlamDaemon::Impl {
     if (!overrides.groundtruth_out.empty()) daemon.groundtruth_out = overrides.groundtruth_out;
     if (!overrides.metrics_out.empty()) daemon.metrics_out = overrides.metrics_out;
     if (!overrides.lcm_url.empty()) config.set("lcm.url", overrides.lcm_url);
+    checkOutputsAreDistinct();
     channels = ChannelConfig::load(config);
     tracking_config = TrackingConfig::load(config);
     filter_config = FilterConfig::load(config);
@@ -225,6 +227,8 @@ struct SlamDaemon::Impl {
   }
 
   int run(ShutdownSignals& signals);
+  /// Throws ConfigError when two outputs name the same file (one would overwrite the other).
+  void checkOutputsAreDistinct() const;
   void handleCommands(ShutdownSignals& signals);
   void publishStatus(LcmBus& bus, StatusBuilder& builder, Pipeline& pipeline, const std::string& note);
   int writeOutputs();
@@ -236,7 +240,8 @@ struct SlamDaemon::Impl {
   void finishBackend();
   void serveMapRequest(LcmBus& bus, const MapRequest& request);
   void publishMapOutputs(LcmBus& bus, const MapperOutputs& outputs);
-  void writeMetrics(const std::vector<StageStats>& stats, const LatencySummary& end_to_end_latency);
+  /// False (logged) when the file could not be written.
+  bool writeMetrics(const std::vector<StageStats>& stats, const LatencySummary& end_to_end_latency);
   void logTrackingSummary() const;
   void logDropSummary(const std::vector<StageStats>& stats,
                       const FrameSourceStats& source_stats) const;
@@ -250,6 +255,27 @@ SlamDaemon::~SlamDaemon() = default;
 int SlamDaemon::run(ShutdownSignals& signals) { return impl_->run(signals); }
 
 const DaemonSummary& SlamDaemon::summary() const { return impl_->summary; }
+
+void SlamDaemon::Impl::checkOutputsAreDistinct() const {
+  const std::pair<const char*, const std::string*> outputs[] = {
+      {"trajectory", &daemon.trajectory_out},
+      {"map", &daemon.map_out},
+      {"ground truth", &daemon.groundtruth_out},
+      {"metrics", &daemon.metrics_out}};
+  for (std::size_t i = 0; i < std::size(outputs); ++i) {
+    for (std::size_t j = i + 1; j < std::size(outputs); ++j) {
+      if (outputs[i].second->empty() || outputs[j].second->empty()) continue;
+      std::error_code ignored;
+      const auto a = std::filesystem::weakly_canonical(*outputs[i].second, ignored);
+      const auto b = std::filesystem::weakly_canonical(*outputs[j].second, ignored);
+      if (a == b) {
+        throw ConfigError(std::string("the ") + outputs[i].first + " and the " +
+                          outputs[j].first + " outputs both name " + *outputs[i].second +
+                          ": one would overwrite the other");
+      }
+    }
+  }
+}
 
 void SlamDaemon::Impl::handleCommands(ShutdownSignals& signals) {
   while (auto command = commands.tryPop()) {
@@ -669,9 +695,10 @@ int SlamDaemon::Impl::run(ShutdownSignals& signals) {
                          << " frames filtered without their detection (late or dropped), "
                          << vanishing_points_overflowed.load() << " detections overflowed";
   }
-  if (!daemon.metrics_out.empty()) writeMetrics(stats, latency);
+  const bool metrics_written = daemon.metrics_out.empty() || writeMetrics(stats, latency);
   if (backend) finishBackend();
-  return writeOutputs();
+  const int outputs = writeOutputs();
+  return outputs != kExitOk ? outputs : metrics_written ? kExitOk : kExitOutputError;
 }
 
 void SlamDaemon::Impl::logTrackingSummary() const {
@@ -729,7 +756,7 @@ void SlamDaemon::Impl::logDropSummary(const std::vector<StageStats>& stats,
   SLAMD_LOG_WARN(kLog) << line.str();
 }
 
-void SlamDaemon::Impl::writeMetrics(const std::vector<StageStats>& stats,
+bool SlamDaemon::Impl::writeMetrics(const std::vector<StageStats>& stats,
                                     const LatencySummary& end_to_end_latency) {
   eval::JsonWriter json(true);
   json.beginObject();
@@ -768,9 +795,18 @@ void SlamDaemon::Impl::writeMetrics(const std::vector<StageStats>& stats,
   }
   json.endObject();
   json.endObject();
-  std::ofstream out(daemon.metrics_out);
-  out << json.str() << "\n";
-  if (!out) SLAMD_LOG_ERROR(kLog) << "cannot write metrics to " << daemon.metrics_out;
+  std::string error;
+  if (!writeOutputFile(
+          daemon.metrics_out,
+          [&](std::ostream& out) {
+            out << json.str() << "\n";
+            return true;
+          },
+          &error)) {
+    SLAMD_LOG_ERROR(kLog) << "metrics not written: " << error;
+    return false;
+  }
+  return true;
 }
 
 void SlamDaemon::Impl::publishMapOutputs(LcmBus& bus, const MapperOutputs& outputs) {

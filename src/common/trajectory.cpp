@@ -6,6 +6,8 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "slamd/common/file_io.hpp"
+
 namespace slamd {
 
 Trajectory parseTumTrajectory(const std::string& text, const std::string& source) {
@@ -73,16 +75,21 @@ std::string formatTumPose(const StampedPose& pose) {
 
 void writeTumTrajectory(const std::string& path, const Trajectory& trajectory,
                         const std::string& header_comment) {
-  std::ofstream file(path);
-  if (!file) throw std::runtime_error("cannot write trajectory file '" + path + "'");
-  if (!header_comment.empty()) {
-    std::istringstream lines(header_comment);
-    std::string line;
-    while (std::getline(lines, line)) file << "# " << line << "\n";
-  }
-  file << "# timestamp tx ty tz qx qy qz qw\n";
-  for (const auto& pose : trajectory) file << formatTumPose(pose) << "\n";
-  if (!file) throw std::runtime_error("error writing trajectory file '" + path + "'");
+  std::string error;
+  const bool written = writeOutputFile(
+      path,
+      [&](std::ostream& file) {
+        if (!header_comment.empty()) {
+          std::istringstream lines(header_comment);
+          std::string line;
+          while (std::getline(lines, line)) file << "# " << line << "\n";
+        }
+        file << "# timestamp tx ty tz qx qy qz qw\n";
+        for (const auto& pose : trajectory) file << formatTumPose(pose) << "\n";
+        return true;
+      },
+      &error);
+  if (!written) throw std::runtime_error("trajectory not written: " + error);
 }
 
 }  // namespace slamd

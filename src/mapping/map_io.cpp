@@ -1,14 +1,8 @@
 #include "slamd/mapping/map_io.hpp"
 
-#include <fcntl.h>
-#include <unistd.h>
-
-#include <cerrno>
-#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
-#include <streambuf>
 
 #include <opencv2/imgcodecs.hpp>
 
@@ -16,117 +10,12 @@ namespace slamd {
 
 namespace {
 
-/// An output stream buffer on a POSIX file descriptor, so the content can be fsynced.
-class FdOutputBuffer : public std::streambuf {
- public:
-  explicit FdOutputBuffer(int fd) : fd_(fd), buffer_(1 << 16) {
-    setp(buffer_.data(), buffer_.data() + buffer_.size());
-  }
-  bool failed() const { return failed_; }
-  int savedErrno() const { return errno_; }
-
- protected:
-  int_type overflow(int_type ch) override {
-    if (!flushBuffer()) return traits_type::eof();
-    if (!traits_type::eq_int_type(ch, traits_type::eof())) {
-      *pptr() = traits_type::to_char_type(ch);
-      pbump(1);
-    }
-    return traits_type::not_eof(ch);
-  }
-  int sync() override { return flushBuffer() ? 0 : -1; }
-
- private:
-  bool flushBuffer() {
-    const char* data = pbase();
-    std::size_t remaining = static_cast<std::size_t>(pptr() - pbase());
-    while (remaining > 0 && !failed_) {
-      const ssize_t written = ::write(fd_, data, remaining);
-      if (written < 0) {
-        if (errno == EINTR) continue;
-        failed_ = true;
-        errno_ = errno;
-        break;
-      }
-      data += written;
-      remaining -= static_cast<std::size_t>(written);
-    }
-    setp(buffer_.data(), buffer_.data() + buffer_.size());
-    return !failed_;
-  }
-
-  int fd_;
-  std::vector<char> buffer_;
-  bool failed_ = false;
-  int errno_ = 0;
-};
-
 bool fail(std::string* error, const std::string& text) {
   if (error) *error = text;
   return false;
 }
 
-std::string errnoText(int error_number) { return std::strerror(error_number); }
-
 }  // namespace
-
-std::string temporaryPathFor(const std::string& path) { return path + ".tmp"; }
-
-bool writeFileAtomically(const std::string& path,
-                         const std::function<bool(std::ostream&)>& writer, std::string* error) {
-  const std::string tmp = temporaryPathFor(path);
-  const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-  if (fd < 0) return fail(error, "cannot create " + tmp + ": " + errnoText(errno));
-  bool ok = true;
-  std::string why;
-  {
-    FdOutputBuffer buffer(fd);
-    std::ostream stream(&buffer);
-    bool accepted = false;
-    try {
-      accepted = writer(stream);
-    } catch (const std::exception& e) {
-      why = std::string("writer threw: ") + e.what();
-    }
-    stream.flush();
-    if (!accepted) {
-      ok = false;
-      if (why.empty()) why = "the writer abandoned the content";
-    } else if (buffer.failed() || !stream.good()) {
-      ok = false;
-      why = "write failed: " + errnoText(buffer.savedErrno());
-    }
-  }
-  // Data must be on disk before the rename makes it visible under the final name.
-  if (ok && ::fsync(fd) != 0) {
-    ok = false;
-    why = "fsync failed: " + errnoText(errno);
-  }
-  if (::close(fd) != 0 && ok) {
-    ok = false;
-    why = "close failed: " + errnoText(errno);
-  }
-  if (!ok) {
-    ::unlink(tmp.c_str());
-    return fail(error, "cannot write " + path + ": " + why);
-  }
-  if (::rename(tmp.c_str(), path.c_str()) != 0) {
-    const int saved = errno;
-    ::unlink(tmp.c_str());
-    return fail(error, "cannot rename " + tmp + " to " + path + ": " + errnoText(saved));
-  }
-  // The rename is durable only once the directory entry is on disk.
-  std::filesystem::path dir = std::filesystem::path(path).parent_path();
-  if (dir.empty()) dir = ".";
-  const int dir_fd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
-  if (dir_fd >= 0) {
-    const bool synced = ::fsync(dir_fd) == 0;
-    const int saved = errno;
-    ::close(dir_fd);
-    if (!synced) return fail(error, "fsync of " + dir.string() + " failed: " + errnoText(saved));
-  }
-  return true;
-}
 
 bool writePly(std::ostream& out, const PointCloud& cloud, PlyFormat format) {
   const bool with_color = cloud.colors_bgr.size() == cloud.points.size() && cloud.hasColor();

@@ -127,6 +127,34 @@ TEST_F(DaemonInProcess, RealTimeSourceBehindScheduleDropsFramesUnreadAndCountsTh
   EXPECT_GT(summary.poses_tracked, 0u);
 }
 
+// Hostile-input issue, row 10: failed outputs exited 0, and one output could overwrite another.
+TEST_F(DaemonInProcess, AnOutputThatCannotBeWrittenGivesTheOutputErrorExitCode) {
+  for (const bool metrics : {false, true}) {
+    Config config = smallSyntheticConfig(5);
+    DaemonOverrides overrides;
+    overrides.source = "synthetic:room";
+    overrides.trajectory_out = metrics ? (dir_ / "trajectory.txt").string() : "/dev/full";
+    if (metrics) overrides.metrics_out = (dir_ / "missing" / "metrics.json").string();
+    ShutdownSignals signals;
+    SlamDaemon daemon(config, overrides);
+    EXPECT_EQ(daemon.run(signals), kExitOutputError) << (metrics ? "metrics" : "trajectory");
+  }
+}
+
+TEST_F(DaemonInProcess, TwoOutputsNamingTheSameFileAreAConfigurationError) {
+  Config config = smallSyntheticConfig(5);
+  DaemonOverrides overrides;
+  overrides.source = "synthetic:room";
+  overrides.trajectory_out = (dir_ / "out.bt").string();
+  overrides.map_out = (dir_ / "." / "out.bt").string();
+  try {
+    SlamDaemon daemon(config, overrides);
+    FAIL() << "no error";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("out.bt"), std::string::npos) << e.what();
+  }
+}
+
 TEST_F(DaemonInProcess, UnknownSourceIsAConfigurationTimeError) {
   Config config = smallSyntheticConfig(10);
   DaemonOverrides overrides;

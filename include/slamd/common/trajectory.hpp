@@ -29,7 +29,8 @@ Trajectory readTumTrajectory(const std::string& path);
 Trajectory parseTumTrajectory(const std::string& text, const std::string& source = "<text>");
 
 /// Writes a TUM trajectory with 6 decimals for the timestamp (microseconds) and 9 for values;
-/// an optional comment header is written as '# ' lines. Throws std::runtime_error on I/O errors.
+/// an optional comment header is written as '# ' lines. Written crash-safely (writeOutputFile);
+/// throws std::runtime_error naming the file and the reason (strerror) on any I/O error.
 void writeTumTrajectory(const std::string& path, const Trajectory& trajectory,
                         const std::string& header_comment = "");
 

@@ -13,20 +13,11 @@
 #include <string>
 #include <vector>
 
+#include "slamd/common/file_io.hpp"
 #include "slamd/mapping/map_types.hpp"
 #include "slamd/mapping/point_cloud.hpp"
 
 namespace slamd {
-
-/// Writes a file crash-safely. `writer` streams the content and returns false to abandon the
-/// write (the temporary file is removed and <path> is untouched). Returns false with a sentence
-/// in *error on any failure (writer refused, open/write/fsync/rename error).
-bool writeFileAtomically(const std::string& path,
-                         const std::function<bool(std::ostream&)>& writer,
-                         std::string* error = nullptr);
-
-/// The temporary file name writeFileAtomically() uses for `path`.
-std::string temporaryPathFor(const std::string& path);
 
 enum class PlyFormat { kAscii, kBinary };
 

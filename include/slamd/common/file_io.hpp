@@ -1,0 +1,35 @@
+#pragma once
+// Writing output files so that a failure is never silent and a crash never leaves half a file.
+//
+//   std::string error;
+//   if (!writeOutputFile("trajectory.txt", [&](std::ostream& out) { out << text; return true; },
+//                        &error)) {
+//     report(error);   // "cannot write trajectory.txt: write failed: No space left on device"
+//   }
+//
+// Every write, flush, fsync, close and rename is checked; errors carry strerror's text.
+
+#include <functional>
+#include <ostream>
+#include <string>
+
+namespace slamd {
+
+/// Writes a file crash-safely: into <path>.tmp, fsync, rename over <path>, fsync of the folder.
+/// `writer` streams the content and returns false to abandon the write (the temporary file is
+/// removed and <path> is untouched). Returns false with a sentence in *error on any failure
+/// (writer refused, open/write/fsync/rename error).
+bool writeFileAtomically(const std::string& path,
+                         const std::function<bool(std::ostream&)>& writer,
+                         std::string* error = nullptr);
+
+/// The temporary file name writeFileAtomically() uses for `path`.
+std::string temporaryPathFor(const std::string& path);
+
+/// writeFileAtomically() for a regular or new file; a device, FIFO or socket that already exists
+/// (/dev/stdout, /dev/full, a pipe) is written in place with every write and the close checked.
+/// A directory is an error.
+bool writeOutputFile(const std::string& path, const std::function<bool(std::ostream&)>& writer,
+                     std::string* error = nullptr);
+
+}  // namespace slamd
