@@ -12,7 +12,9 @@ namespace slamd {
 
 namespace {
 
-constexpr std::size_t kMaxPixels = 16384u * 16384u;
+/// Largest image a message may declare: 16.8 megapixels, eight times a 1920x1080 RGB-D camera
+/// (at most about 50 MB of decoded colour and 32 MB of depth per frame).
+constexpr std::size_t kMaxPixels = 4096u * 4096u;
 
 const char* colorEncodingName(int encoding) {
   switch (encoding) {
@@ -42,6 +44,7 @@ std::vector<std::uint8_t> encodeImage(const char* extension, const cv::Mat& imag
 cv::Mat decodeImage(const std::vector<std::uint8_t>& bytes, int flags, int expected_type,
                     int width, int height, const std::string& what) {
   if (bytes.empty()) throw FrameDecodeError(what + ": no bytes");
+  checkEncodedImageSize(bytes.data(), bytes.size(), width, height, what);
   cv::Mat image;
   try {
     image = cv::imdecode(cv::Mat(1, static_cast<int>(bytes.size()), CV_8UC1,
@@ -62,6 +65,69 @@ cv::Mat decodeImage(const std::vector<std::uint8_t>& bytes, int flags, int expec
   }
   return image;
 }
+
+std::uint32_t bigEndian(const std::uint8_t* p, int bytes) {
+  std::uint32_t value = 0;
+  for (int i = 0; i < bytes; ++i) value = (value << 8) | p[i];
+  return value;
+}
+
+}  // namespace
+
+std::optional<cv::Size> encodedImageSize(const std::uint8_t* data, std::size_t size) {
+  static const std::uint8_t kPngSignature[8] = {0x89, 'P', 'N', 'G', 0x0D, 0x0A, 0x1A, 0x0A};
+  if (size >= 24 && std::memcmp(data, kPngSignature, 8) == 0 &&
+      std::memcmp(data + 12, "IHDR", 4) == 0) {
+    const std::uint32_t width = bigEndian(data + 16, 4);
+    const std::uint32_t height = bigEndian(data + 20, 4);
+    if (width == 0 || height == 0 || width > 1u << 30 || height > 1u << 30) return std::nullopt;
+    return cv::Size(static_cast<int>(width), static_cast<int>(height));
+  }
+  if (size < 4 || data[0] != 0xFF || data[1] != 0xD8) return std::nullopt;
+  // JPEG: walk the marker segments to the first start-of-frame (C0-CF except C4 DHT, C8 JPG
+  // and CC DAC): precision, height, width.
+  std::size_t pos = 2;
+  while (pos + 4 <= size) {
+    if (data[pos] != 0xFF) return std::nullopt;
+    const std::uint8_t marker = data[pos + 1];
+    if (marker == 0xFF) {  // fill byte
+      ++pos;
+      continue;
+    }
+    if (marker == 0xD9 || marker == 0xDA) return std::nullopt;  // end of image, or scan data
+    if ((marker >= 0xD0 && marker <= 0xD7) || marker == 0x01) {  // no length field
+      pos += 2;
+      continue;
+    }
+    const std::size_t length = bigEndian(data + pos + 2, 2);
+    if (length < 2) return std::nullopt;
+    const bool start_of_frame =
+        marker >= 0xC0 && marker <= 0xCF && marker != 0xC4 && marker != 0xC8 && marker != 0xCC;
+    if (start_of_frame) {
+      if (length < 7 || pos + 9 > size) return std::nullopt;
+      const auto height = static_cast<int>(bigEndian(data + pos + 5, 2));
+      const auto width = static_cast<int>(bigEndian(data + pos + 7, 2));
+      if (width == 0 || height == 0) return std::nullopt;
+      return cv::Size(width, height);
+    }
+    pos += 2 + length;
+  }
+  return std::nullopt;
+}
+
+void checkEncodedImageSize(const std::uint8_t* data, std::size_t size, int width, int height,
+                           const std::string& what) {
+  const std::optional<cv::Size> declared = encodedImageSize(data, size);
+  if (!declared) throw FrameDecodeError(what + ": not a PNG or JPEG image, or its header is cut");
+  if (declared->width != width || declared->height != height) {
+    throw FrameDecodeError(what + ": image header says " + std::to_string(declared->width) + "x" +
+                           std::to_string(declared->height) + ", message says " +
+                           std::to_string(width) + "x" + std::to_string(height) +
+                           " (not decoded)");
+  }
+}
+
+namespace {
 
 void checkSize(int width, int height, const std::string& what) {
   if (width <= 0 || height <= 0 ||

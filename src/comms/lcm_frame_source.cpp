@@ -37,7 +37,14 @@ std::string fingerprintText(const std::vector<std::uint8_t>& bytes) {
 // image with only a warning on stderr. Capture decodes JPEG colour strictly first (any libjpeg
 // warning is an error) and hands the codec the raw pixels instead.
 // Returns an empty string, or why the JPEG is bad.
-std::string strictJpegToRaw(std::vector<std::uint8_t>& data, bool rgb_order) {
+std::string strictJpegToRaw(std::vector<std::uint8_t>& data, bool rgb_order, int width,
+                            int height) {
+  try {
+    // Before libjpeg allocates for whatever size the header claims.
+    checkEncodedImageSize(data.data(), data.size(), width, height, "JPEG colour");
+  } catch (const FrameDecodeError& e) {
+    return e.what();
+  }
   std::string error;
   cv::Mat bgr = decodeColorImage(data.data(), data.size(), error);
   if (bgr.empty()) return "JPEG colour: " + error;
@@ -152,7 +159,7 @@ FrameRead LcmFrameSource::decode(const RawMessage& message) {
           decodeMessage<slamd::rgbd_frame_t>(message.bytes.data(), message.bytes.size(), &error);
       if (!decoded) return skipFrame(counters_, kComponent, what + ": " + error);
       if (decoded->color_encoding == slamd::rgbd_frame_t::COLOR_JPEG) {
-        error = strictJpegToRaw(decoded->color_data, false);
+        error = strictJpegToRaw(decoded->color_data, false, decoded->width, decoded->height);
         if (!error.empty()) return skipFrame(counters_, kComponent, what + ": " + error);
         decoded->color_encoding = slamd::rgbd_frame_t::COLOR_BGR8;
         decoded->color_nbytes = static_cast<std::int32_t>(decoded->color_data.size());
@@ -163,7 +170,8 @@ FrameRead LcmFrameSource::decode(const RawMessage& message) {
           decodeMessage<kinect::frame_msg_t>(message.bytes.data(), message.bytes.size(), &error);
       if (!decoded) return skipFrame(counters_, kComponent, what + ": " + error);
       if (decoded->image.image_data_format == kinect::image_msg_t::VIDEO_RGB_JPEG) {
-        error = strictJpegToRaw(decoded->image.image_data, true);
+        error = strictJpegToRaw(decoded->image.image_data, true, decoded->image.width,
+                                decoded->image.height);
         if (!error.empty()) return skipFrame(counters_, kComponent, what + ": " + error);
         decoded->image.image_data_format = kinect::image_msg_t::VIDEO_RGB;
         decoded->image.image_data_nbytes =

@@ -148,6 +148,78 @@ TEST(FrameCodec, KinectUnsupportedFormatsAreNamedInTheError) {
   }
 }
 
+FrameEncodeOptions withPngDepth(ColorEncoding color) {
+  FrameEncodeOptions options;
+  options.color = color;
+  options.depth = DepthEncoding::kPngU16;
+  return options;
+}
+
+// Overwrites the image size a PNG (IHDR) or baseline JPEG (SOF0) header declares.
+void patchHeaderSize(std::vector<std::uint8_t>& bytes, int width, int height) {
+  auto put = [&](std::size_t at, std::uint32_t value, int count) {
+    for (int i = 0; i < count; ++i) {
+      bytes[at + i] = static_cast<std::uint8_t>(value >> (8 * (count - 1 - i)));
+    }
+  };
+  if (bytes[0] == 0x89) {
+    put(16, static_cast<std::uint32_t>(width), 4);
+    put(20, static_cast<std::uint32_t>(height), 4);
+    return;
+  }
+  for (std::size_t pos = 2; pos + 9 < bytes.size(); pos += 2 + (bytes[pos + 2] << 8 | bytes[pos + 3])) {
+    if (bytes[pos + 1] == 0xC0) {
+      put(pos + 5, static_cast<std::uint32_t>(height), 2);
+      put(pos + 7, static_cast<std::uint32_t>(width), 2);
+      return;
+    }
+  }
+  FAIL() << "no SOF0 marker";
+}
+
+TEST(FrameCodec, HeaderSizesAreReadWithoutDecoding) {
+  const RgbdFrame frame = makeFrame(64, 48);
+  for (const ColorEncoding color : {ColorEncoding::kPng, ColorEncoding::kJpeg}) {
+    const slamd::rgbd_frame_t message = encodeRgbdFrame(frame, withPngDepth(color));
+    EXPECT_EQ(encodedImageSize(message.color_data.data(), message.color_data.size()),
+              cv::Size(64, 48));
+    EXPECT_EQ(encodedImageSize(message.depth_data.data(), message.depth_data.size()),
+              cv::Size(64, 48));
+  }
+  const std::uint8_t garbage[] = {1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17,
+                                  18, 19, 20, 21, 22, 23, 24, 25};
+  EXPECT_FALSE(encodedImageSize(garbage, sizeof garbage).has_value());
+}
+
+TEST(FrameCodec, AnImageWhoseHeaderClaimsAnotherSizeIsRejectedBeforeDecoding) {
+  // Hostile-input issue, row 5: a 261 kB frame whose PNG depth inflated to 1.38 GB. The header's
+  // size must equal the size the message declares; nothing is inflated otherwise.
+  const RgbdFrame frame = makeFrame(64, 48);
+  for (const ColorEncoding color : {ColorEncoding::kPng, ColorEncoding::kJpeg}) {
+    slamd::rgbd_frame_t depth_bomb = encodeRgbdFrame(frame, withPngDepth(color));
+    patchHeaderSize(depth_bomb.depth_data, 30000, 30000);
+    slamd::rgbd_frame_t color_bomb = encodeRgbdFrame(frame, withPngDepth(color));
+    patchHeaderSize(color_bomb.color_data, 30000, 30000);
+    for (const auto* message : {&depth_bomb, &color_bomb}) {
+      try {
+        decodeRgbdFrame(*message);
+        ADD_FAILURE() << "decoded";
+      } catch (const FrameDecodeError& e) {
+        EXPECT_NE(std::string(e.what()).find("header says 30000x30000, message says 64x48"),
+                  std::string::npos)
+            << e.what();
+      }
+    }
+  }
+}
+
+TEST(FrameCodec, AMessageDeclaringMoreThan16MegapixelsIsRejected) {
+  slamd::rgbd_frame_t message = encodeRgbdFrame(makeFrame(64, 48), withPngDepth(ColorEncoding::kPng));
+  message.width = 8192;
+  message.height = 8192;
+  EXPECT_THROW(decodeRgbdFrame(message), FrameDecodeError);
+}
+
 TEST(FrameCodec, EncodingNamesParse) {
   EXPECT_EQ(parseColorEncoding("jpeg"), ColorEncoding::kJpeg);
   EXPECT_EQ(parseDepthEncoding("zlib"), DepthEncoding::kZlibU16);

@@ -6,6 +6,7 @@
 // FrameDecodeError with a sentence naming what is wrong; it never crashes on bad bytes.
 
 #include <stdexcept>
+#include <optional>
 #include <string>
 
 #include "slamd/common/rgbd_frame.hpp"
@@ -42,6 +43,16 @@ kinect::frame_msg_t encodeKinectFrame(const RgbdFrame& frame, bool jpeg_color, b
 /// The kinect message carries no intrinsics: they come from configuration. Formats other than
 /// VIDEO_RGB / VIDEO_RGB_JPEG colour and DEPTH_MM depth are rejected with an error naming them.
 RgbdFrame decodeKinectFrame(const kinect::frame_msg_t& message, const CameraIntrinsics& intrinsics);
+
+/// The width and height a PNG (IHDR) or JPEG (start-of-frame marker) header declares, read
+/// without decoding; nullopt when the bytes are neither or the header is cut short. Decoders check
+/// it against the size the message declares before inflating anything, so a small message cannot
+/// make them allocate for a huge image.
+std::optional<cv::Size> encodedImageSize(const std::uint8_t* data, std::size_t size);
+
+/// Throws FrameDecodeError unless the PNG/JPEG header declares exactly width x height.
+void checkEncodedImageSize(const std::uint8_t* data, std::size_t size, int width, int height,
+                           const std::string& what);
 
 /// zlib helpers (raw deflate stream with zlib header), throwing FrameDecodeError on failure.
 std::vector<std::uint8_t> zlibCompress(const std::uint8_t* data, std::size_t size, int level);
