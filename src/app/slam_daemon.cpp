@@ -690,6 +690,10 @@ int SlamDaemon::Impl::run(ShutdownSignals& signals) {
                        << latency.p99_ms << " ms";
   logTrackingSummary();
   logDropSummary(stats, source_stats);
+  if (source_stats.clock_reanchors > 0) {
+    SLAMD_LOG_WARN(kLog) << "source: its clock jumped and was re-anchored "
+                         << source_stats.clock_reanchors << " times (see the capture warnings)";
+  }
   if (vanishing_points_late.load() + vanishing_points_overflowed.load() > 0) {
     SLAMD_LOG_INFO(kLog) << "vanishing points: " << vanishing_points_late.load()
                          << " frames filtered without their detection (late or dropped), "

@@ -1,5 +1,7 @@
 #include "slamd/capture/source_support.hpp"
 
+#include <cstdlib>
+
 #include "slamd/common/log.hpp"
 
 namespace slamd {
@@ -25,6 +27,11 @@ void SourceCounters::droppedBehindSchedule() {
   std::lock_guard<std::mutex> lock(mutex_);
   ++stats_.frames_dropped;
   ++stats_.frames_behind_schedule;
+}
+
+void SourceCounters::reanchored() {
+  std::lock_guard<std::mutex> lock(mutex_);
+  ++stats_.clock_reanchors;
 }
 
 void SourceCounters::reconnected() {
@@ -53,6 +60,32 @@ std::string FrameGate::check(const RgbdFrame& frame, const std::string& what) {
   has_last_ = true;
   last_utime_ = frame.utime;
   return {};
+}
+
+StreamClock::Verdict StreamClock::check(Utime utime, std::int64_t arrival_steady_ns) {
+  const std::int64_t offset_us = utime - arrival_steady_ns / 1000;
+  if (!anchored_) {
+    anchored_ = true;
+    offset_us_ = offset_us;
+    last_jump_us_ = 0;
+    return Verdict::kAccept;
+  }
+  last_jump_us_ = offset_us - offset_us_;
+  if (std::llabs(last_jump_us_) <= max_jump_us_) {
+    offset_us_ = offset_us;  // follows slow drift between the two clocks
+    run_length_ = 0;
+    return Verdict::kAccept;
+  }
+  if (run_length_ > 0 && std::llabs(offset_us - run_offset_us_) <= max_jump_us_) {
+    ++run_length_;
+  } else {
+    run_length_ = 1;
+  }
+  run_offset_us_ = offset_us;
+  if (run_length_ < reanchor_frames_) return Verdict::kReject;
+  offset_us_ = offset_us;
+  run_length_ = 0;
+  return Verdict::kReanchor;
 }
 
 FrameRead skipFrame(SourceCounters& counters, const char* component, const std::string& message) {

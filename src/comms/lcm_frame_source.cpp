@@ -3,6 +3,7 @@
 #include <cstdio>
 #include <lcm/lcm-cpp.hpp>
 #include <opencv2/imgproc.hpp>
+#include <sstream>
 
 #include "slamd/capture/image_io.hpp"
 #include "slamd/common/log.hpp"
@@ -67,6 +68,9 @@ LcmFrameSourceConfig LcmFrameSourceConfig::load(Config& config) {
                                     : LcmFrameFormat::kAuto;
   out.queue_capacity = config.getInt("capture.lcm.queue_capacity", out.queue_capacity, 1, 1000);
   out.idle_end_s = config.getDouble("capture.lcm.idle_end_s", out.idle_end_s, 0.0, 3600.0);
+  out.max_time_jump_s =
+      config.getDouble("capture.lcm.max_time_jump_s", out.max_time_jump_s, 1e-3, 86400.0);
+  out.reanchor_frames = config.getInt("capture.lcm.reanchor_frames", out.reanchor_frames, 1, 1000);
   out.camera = CameraConfig::load(config, 1000.0);
   return out;
 }
@@ -95,6 +99,7 @@ void LcmFrameSource::open() {
   received_.store(0, std::memory_order_relaxed);
   last_arrival_ns_.store(0, std::memory_order_relaxed);
   gate_.reset();
+  clock_ = StreamClock(config_.max_time_jump_s, config_.reanchor_frames);
   thread_ = std::thread([this] { receiveLoop(); });
   SLAMD_LOG_INFO(kComponent) << "listening on " << description();
 }
@@ -116,7 +121,8 @@ void LcmFrameSource::onMessage(const lcm::ReceiveBuffer* buffer, const std::stri
   const auto* data = static_cast<const std::uint8_t*>(buffer->data);
   message.bytes.assign(data, data + buffer->data_size);
   message.number = received_.fetch_add(1, std::memory_order_relaxed) + 1;
-  last_arrival_ns_.store(steadyNowNs(), std::memory_order_relaxed);
+  message.arrival_steady_ns = steadyNowNs();
+  last_arrival_ns_.store(message.arrival_steady_ns, std::memory_order_relaxed);
   queue_->push(std::move(message));
   arrived_.notify();
 }
@@ -195,6 +201,24 @@ FrameRead LcmFrameSource::decode(const RawMessage& message) {
   frame->received_steady_ns = steadyNowNs();
   if (frame->sequence == 0) frame->sequence = sequence_;
   ++sequence_;
+  switch (clock_.check(frame->utime, message.arrival_steady_ns)) {
+    case StreamClock::Verdict::kAccept:
+      break;
+    case StreamClock::Verdict::kReject: {
+      std::ostringstream text;
+      text << what << ": timestamp " << frame->utime << " us is " << clock_.lastJumpS()
+           << " s off the stream's clock (rejected; " << config_.reanchor_frames
+           << " agreeing frames in a row re-anchor it)";
+      return skipFrame(counters_, kComponent, text.str());
+    }
+    case StreamClock::Verdict::kReanchor:
+      SLAMD_LOG_WARN(kComponent) << channel_ << ": the source's clock jumped by "
+                                 << clock_.lastJumpS() << " s; re-anchored after "
+                                 << config_.reanchor_frames << " agreeing frames";
+      counters_.reanchored();
+      gate_.reset();
+      break;
+  }
   const std::string gate_error = gate_.check(*frame, what);
   if (!gate_error.empty()) return skipFrame(counters_, kComponent, gate_error);
   counters_.frameRead();

@@ -169,6 +169,55 @@ TEST(LcmFrameSource, MalformedMessagesAreSkippedCountedAndNamed) {
   EXPECT_EQ(source.stats().frames_read, 2u);
 }
 
+// Hostile-input issue, row 4: one frame stamped far in the future (or a bit-flipped utime) made
+// every later frame "not increase", and poses never resumed.
+TEST(LcmFrameSource, OneFrameFarFromTheStreamsClockIsRejectedAndTheStreamGoesOn) {
+  MemqFixture memq;
+  LcmFrameSource source(memq.lcm, kChannel, memq.source_config());
+  source.open();
+  FrameEncodeOptions options;
+  publishRaw(*memq.lcm, encodeMessage(encodeRgbdFrame(*makeFrame(0), options)));
+  RgbdFrame future = *makeFrame(1);
+  future.utime += 3600LL * 1'000'000;  // an hour ahead
+  publishRaw(*memq.lcm, encodeMessage(encodeRgbdFrame(future, options)));
+  RgbdFrame flipped = *makeFrame(2);
+  flipped.utime ^= 1LL << 52;  // one flipped bit
+  publishRaw(*memq.lcm, encodeMessage(encodeRgbdFrame(flipped, options)));
+  for (int i = 3; i < 6; ++i) {
+    publishRaw(*memq.lcm, encodeMessage(encodeRgbdFrame(*makeFrame(i), options)));
+  }
+  const auto received = readCount(source, 6);
+  ASSERT_EQ(received.frames.size(), 4u);
+  EXPECT_EQ(received.frames.back()->sequence, 5);
+  ASSERT_EQ(received.skip_messages.size(), 2u);
+  for (const auto& message : received.skip_messages) {
+    EXPECT_NE(message.find("off the stream's clock"), std::string::npos) << message;
+  }
+  EXPECT_EQ(source.stats().clock_reanchors, 0u);
+}
+
+TEST(LcmFrameSource, AClockThatReallyJumpsIsReanchoredAfterAgreeingFrames) {
+  MemqFixture memq;
+  LcmFrameSource source(memq.lcm, kChannel, memq.source_config());
+  source.open();
+  FrameEncodeOptions options;
+  for (int i = 0; i < 3; ++i) {
+    publishRaw(*memq.lcm, encodeMessage(encodeRgbdFrame(*makeFrame(i), options)));
+  }
+  // The camera restarted: its clock now reads 100 s earlier, consistently.
+  for (int i = 3; i < 10; ++i) {
+    RgbdFrame frame = *makeFrame(i);
+    frame.utime -= 100LL * 1'000'000;
+    publishRaw(*memq.lcm, encodeMessage(encodeRgbdFrame(frame, options)));
+  }
+  const auto received = readCount(source, 10);
+  // 4 rejected, the 5th agreeing frame re-anchors the stream and is delivered, as are the rest.
+  EXPECT_EQ(received.skip_messages.size(), 4u);
+  ASSERT_EQ(received.frames.size(), 6u);
+  EXPECT_EQ(received.frames[3]->sequence, 7);
+  EXPECT_EQ(source.stats().clock_reanchors, 1u);
+}
+
 TEST(LcmFrameSource, FormatOptionRejectsTheOtherType) {
   MemqFixture memq;
   LcmFrameSourceConfig config = memq.source_config();

@@ -55,6 +55,7 @@ struct FrameSourceStats {
   /// schedule (the capture thread, or what shares its CPU, was too slow).
   std::uint64_t frames_behind_schedule = 0;
   std::uint64_t reconnects = 0;      ///< device re-opens after a disconnect
+  std::uint64_t clock_reanchors = 0;  ///< live stream's clock really jumped and was re-anchored
   std::string last_error;            ///< most recent skip or failure message
 };
 

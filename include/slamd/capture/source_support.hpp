@@ -27,6 +27,7 @@ class SourceCounters {
   /// A frame passed over unread by a player behind its schedule (also counted as dropped).
   void droppedBehindSchedule();
   void reconnected();
+  void reanchored();
   /// Records a failure message (e.g. a disconnect) without counting a frame.
   void failure(const char* component, const std::string& message);
   FrameSourceStats snapshot() const;
@@ -46,6 +47,40 @@ class FrameGate {
  private:
   bool has_last_ = false;
   Utime last_utime_ = 0;
+};
+
+/// Guards a live stream against timestamps that do not fit its clock. The stream's clock is the
+/// offset between frame timestamps and their arrival times (steady clock), taken from the frames
+/// accepted so far. A frame whose offset is more than max_jump_s from it (one bit-flipped or
+/// far-future stamp) is rejected, so it cannot poison the stream. When `reanchor_frames` rejected
+/// frames in a row agree with each other (offsets within max_jump_s), the source's clock really
+/// jumped (a restarted camera, a log replayed again): the stream re-anchors to them.
+/// One owner thread.
+class StreamClock {
+ public:
+  enum class Verdict { kAccept, kReject, kReanchor };
+
+  StreamClock(double max_jump_s, int reanchor_frames)
+      : max_jump_us_(static_cast<std::int64_t>(max_jump_s * 1e6)),
+        reanchor_frames_(reanchor_frames) {}
+
+  /// kReanchor accepts the frame and tells the caller to forget earlier timestamps.
+  Verdict check(Utime utime, std::int64_t arrival_steady_ns);
+  /// How far (seconds) the last checked frame was from the stream's clock.
+  double lastJumpS() const { return static_cast<double>(last_jump_us_) * 1e-6; }
+  void reset() {
+    anchored_ = false;
+    run_length_ = 0;
+  }
+
+ private:
+  std::int64_t max_jump_us_;
+  int reanchor_frames_;
+  bool anchored_ = false;
+  std::int64_t offset_us_ = 0;  ///< utime - arrival of the last accepted frame
+  std::int64_t last_jump_us_ = 0;
+  int run_length_ = 0;          ///< consecutive rejected frames agreeing with each other
+  std::int64_t run_offset_us_ = 0;
 };
 
 /// Builds a kSkipped read after counting it.

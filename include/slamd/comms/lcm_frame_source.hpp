@@ -48,6 +48,12 @@ struct LcmFrameSourceConfig {
   LcmFrameFormat format = LcmFrameFormat::kAuto;  ///< capture.lcm.format: auto|rgbd|kinect
   int queue_capacity = 4;                         ///< capture.lcm.queue_capacity, messages, 1..1000
   double idle_end_s = 0.0;                        ///< capture.lcm.idle_end_s, 0 = never, [0, 3600]
+  /// capture.lcm.max_time_jump_s, (0, 86400]: a frame whose timestamp is further than this from
+  /// the stream's clock is rejected (StreamClock)
+  double max_time_jump_s = 1.0;
+  /// capture.lcm.reanchor_frames, 1..1000: rejected frames in a row, agreeing with each other,
+  /// after which the stream's clock is taken to have jumped for real and is re-anchored
+  int reanchor_frames = 5;
   CameraConfig camera;                            ///< camera.*, for kinect.frame_msg_t
 
   static LcmFrameSourceConfig load(Config& config);
@@ -78,6 +84,7 @@ class LcmFrameSource : public FrameSource {
   struct RawMessage {
     std::vector<std::uint8_t> bytes;
     std::uint64_t number = 0;  ///< 1-based count of messages on this channel
+    std::int64_t arrival_steady_ns = 0;
   };
 
   void onMessage(const lcm::ReceiveBuffer* buffer, const std::string& channel);
@@ -98,6 +105,7 @@ class LcmFrameSource : public FrameSource {
   std::int64_t sequence_ = 0;
   SourceCounters counters_;
   FrameGate gate_;
+  StreamClock clock_{1.0, 5};
 };
 
 }  // namespace slamd
