@@ -564,7 +564,9 @@ int SlamDaemon::Impl::run(ShutdownSignals& signals) {
           bus->publishMessage(channels.vanishing_point,
                               toVanishingPointMessage(pose.utime, *packet.vanishing_point));
         }
-        if (pose.tracking_state != TrackingState::kLost) {
+        // A lost pose, or the placeholder before tracking could start, is not an estimate.
+        if (pose.tracking_state != TrackingState::kLost &&
+            pose.tracking_state != TrackingState::kNotInitialized) {
           trajectory.push_back(StampedPose{utimeToSeconds(pose.utime), pose.T_world_camera});
         }
       });
@@ -715,7 +717,7 @@ void SlamDaemon::Impl::logTrackingSummary() const {
   if (summary.poses_published == 0) {
     SLAMD_LOG_WARN(kLog) << "tracking: no pose was published";
   } else if (summary.poses_tracked == 0) {
-    SLAMD_LOG_WARN(kLog) << line.str() << "; tracking never succeeded";
+    SLAMD_LOG_WARN(kLog) << line.str() << "; NO POSE WAS MEASURED: tracking never started";
   } else if (summary.tracking_lost_at_end) {
     SLAMD_LOG_WARN(kLog) << line.str() << "; tracking LOST at the end ("
                          << tracking_tally.lossNote() << ")";

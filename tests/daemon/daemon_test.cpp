@@ -110,6 +110,22 @@ TEST_F(DaemonInProcess, SummarySaysPlainlyWhenTrackingIsLostAtTheEnd) {
   EXPECT_GE(summary.longest_loss_s, 0.9);
 }
 
+TEST_F(DaemonInProcess, ASequenceWithoutUsableDepthProducesNoMeasuredPoseAndSaysSo) {
+  // Hostile-input issue, row 11: all-zero depth in every frame; the summary said "35 tracked,
+  // 35 poses published" with an empty trajectory. Here the lens is covered from the first frame.
+  Config config = smallSyntheticConfig(35);
+  config.set("synthetic.blackout_start_s", "0");
+  config.set("synthetic.blackout_duration_s", "100");
+  DaemonOverrides overrides;
+  overrides.source = "synthetic:room";
+  overrides.trajectory_out = (dir_ / "trajectory.txt").string();
+  const DaemonSummary summary = runToEnd(config, overrides);
+  EXPECT_EQ(summary.frames_captured, 35u);
+  EXPECT_EQ(summary.poses_tracked, 0u);
+  EXPECT_EQ(summary.poses_not_initialized + summary.poses_lost + summary.poses_predicted, 35u);
+  EXPECT_TRUE(readTumTrajectory(overrides.trajectory_out).empty());
+}
+
 TEST_F(DaemonInProcess, RealTimeSourceBehindScheduleDropsFramesUnreadAndCountsThem) {
   // Played at 10x real time (300 Hz), the renderer cannot keep up: the source passes over the
   // frames it is too late for without rendering them, and every frame is accounted for.

@@ -75,5 +75,10 @@ TEST_F(DaemonScenario, HangupUser1AndAClosedLogPipeStillWriteEverything) {
   EXPECT_EQ(run("signals_and_pipes", &log), 0) << log;
 }
 
+TEST_F(DaemonScenario, AnIdleLcmSourceCountsOnlyRealFrames) {
+  std::string log;
+  EXPECT_EQ(run("idle_lcm_source", &log), 0) << log;
+}
+
 }  // namespace
 }  // namespace slamd
