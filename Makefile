@@ -2,14 +2,14 @@
 #   make run    (installs dependencies, builds, runs slamd on a built-in synthetic world)
 #   make test   (installs dependencies, builds, runs every test, plus the concurrency tests
 #                under ThreadSanitizer)
-# Other targets: deps, build, bench, tsan, asan, ubsan, clean.
+# Other targets: deps, build, bench, tsan, asan, ubsan, asan-ubsan, clean.
 
 BUILD_DIR ?= build
 JOBS ?= 2
 CMAKE_ARGS ?=
 CTEST_ARGS ?=
 
-.PHONY: all deps build test unit-test run bench tsan asan ubsan clean
+.PHONY: all deps build test unit-test run bench tsan asan ubsan asan-ubsan clean
 
 all: build
 
@@ -51,5 +51,12 @@ ubsan: deps
 	cmake --build build-ubsan -j$(JOBS)
 	cd build-ubsan && UBSAN_OPTIONS="print_stacktrace=1" ctest --output-on-failure -j$(JOBS) $(CTEST_ARGS)
 
+# AddressSanitizer and UndefinedBehaviorSanitizer in one build, over every test.
+asan-ubsan: deps
+	cmake -S . -B build-asan-ubsan -DSLAMD_SANITIZE=address+undefined -DSLAMD_BUILD_BENCH=OFF $(CMAKE_ARGS)
+	cmake --build build-asan-ubsan -j$(JOBS)
+	cd build-asan-ubsan && ASAN_OPTIONS="detect_leaks=1" UBSAN_OPTIONS="print_stacktrace=1" \
+	  ctest --output-on-failure -j$(JOBS) $(CTEST_ARGS)
+
 clean:
-	rm -rf $(BUILD_DIR) build-tsan build-asan build-ubsan
+	rm -rf $(BUILD_DIR) build-tsan build-asan build-ubsan build-asan-ubsan

@@ -19,10 +19,15 @@ int main(int argc, char** argv) {
   options.setPositional("COMMAND [ARGUMENT]", 1, 2);
   options.addOption("lcm-url", "URL", "LCM URL (overrides lcm.url)");
   if (!options.parse(argc, argv)) return options.exitCode();
+  // Each constant is copied (std::int8_t{...}): lcm-gen declares them without a definition, so
+  // binding one to a reference (std::pair's constructor) fails to link without optimisation.
   const std::map<std::string, std::int8_t> commands = {
-      {"save-map", slamd::command_t::SAVE_MAP},   {"publish-map", slamd::command_t::PUBLISH_MAP},
-      {"pause", slamd::command_t::PAUSE},         {"resume", slamd::command_t::RESUME},
-      {"reset", slamd::command_t::RESET},         {"shutdown", slamd::command_t::SHUTDOWN}};
+      {"save-map", std::int8_t{slamd::command_t::SAVE_MAP}},
+      {"publish-map", std::int8_t{slamd::command_t::PUBLISH_MAP}},
+      {"pause", std::int8_t{slamd::command_t::PAUSE}},
+      {"resume", std::int8_t{slamd::command_t::RESUME}},
+      {"reset", std::int8_t{slamd::command_t::RESET}},
+      {"shutdown", std::int8_t{slamd::command_t::SHUTDOWN}}};
   const auto command = commands.find(options.positional()[0]);
   if (command == commands.end()) {
     std::cerr << "slamd-cmd: unknown command '" << options.positional()[0] << "'\n\n"
