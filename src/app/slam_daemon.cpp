@@ -652,8 +652,6 @@ int SlamDaemon::Impl::run(ShutdownSignals& signals) {
       summary.frames_dropped_before_tracking += edge.dropped + edge.discarded;
     }
   }
-  summary.frames_dropped_other =
-      summary.drops - summary.frames_behind_schedule - summary.frames_dropped_before_tracking;
   summary.poses_tracked = tracking_tally.tracked.load();
   summary.poses_predicted = tracking_tally.predicted.load();
   summary.poses_lost = tracking_tally.lost.load();

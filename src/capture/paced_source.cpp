@@ -39,7 +39,6 @@ void PacedSource::open() {
   pending_.reset();
   started_ = false;
   index_ = 0;
-  pending_index_ = 0;
   if (inner_->isLive() && config_.mode != PacingMode::kAsFastAsPossible) {
     SLAMD_LOG_WARN("capture.pacing")
         << inner_->description() << " is live: frames arrive on the device's clock, pacing "
@@ -95,9 +94,8 @@ FrameRead PacedSource::next(std::chrono::milliseconds timeout) {
       }
       ++index_;
       pending_ = std::move(read.frame);
-      pending_index_ = index_;
     }
-    const auto due = dueTime(pending_->utime, pending_index_);
+    const auto due = dueTime(pending_->utime, index_);  // index_ is the pending frame's
     const auto now = std::chrono::steady_clock::now();
     if (!pending_can_skip_ && now > due + max_lag) {
       // A source that must be read to advance (no upcomingUtime) and was read too late to be

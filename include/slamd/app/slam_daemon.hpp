@@ -49,7 +49,6 @@ struct DaemonSummary {
   // Why frames were dropped (each also counted in `drops`).
   std::uint64_t frames_behind_schedule = 0;  ///< passed over by a real-time source running late
   std::uint64_t frames_dropped_before_tracking = 0;  ///< tracking's input queue was full
-  std::uint64_t frames_dropped_other = 0;            ///< every other drop
   std::uint64_t drops = 0;
   std::uint64_t errors = 0;
   std::uint64_t malformed_commands = 0;

@@ -73,7 +73,6 @@ class PacedSource : public FrameSource {
   std::chrono::steady_clock::time_point start_;
   Utime first_utime_ = 0;
   std::uint64_t index_ = 0;  ///< frames read or passed over since the first
-  std::uint64_t pending_index_ = 0;
   bool pending_can_skip_ = false;  ///< pending_ came from a source that can pass over frames
   std::atomic<std::uint64_t> dropped_read_late_{0};
 };

@@ -68,10 +68,6 @@ class StreamClock {
   Verdict check(Utime utime, std::int64_t arrival_steady_ns);
   /// How far (seconds) the last checked frame was from the stream's clock.
   double lastJumpS() const { return static_cast<double>(last_jump_us_) * 1e-6; }
-  void reset() {
-    anchored_ = false;
-    run_length_ = 0;
-  }
 
  private:
   std::int64_t max_jump_us_;
