@@ -2,14 +2,14 @@
 #   make run    (installs dependencies, builds, runs slamd on a built-in synthetic world)
 #   make test   (installs dependencies, builds, runs every test, plus the concurrency tests
 #                under ThreadSanitizer)
-# Other targets: deps, build, bench, tsan, asan, ubsan, asan-ubsan, clean.
+# Other targets: deps, build, bench, tsan, asan, ubsan, asan-ubsan, fuzz, clean.
 
 BUILD_DIR ?= build
 JOBS ?= 2
 CMAKE_ARGS ?=
 CTEST_ARGS ?=
 
-.PHONY: all deps build test unit-test run bench tsan asan ubsan asan-ubsan clean
+.PHONY: all deps build test unit-test run bench tsan asan ubsan asan-ubsan fuzz clean
 
 all: build
 
@@ -58,5 +58,11 @@ asan-ubsan: deps
 	cd build-asan-ubsan && ASAN_OPTIONS="detect_leaks=1" UBSAN_OPTIONS="print_stacktrace=1" \
 	  ctest --output-on-failure -j$(JOBS) $(CTEST_ARGS)
 
+# libFuzzer over everything slamd reads from outside (tests/fuzz): FUZZ_SECONDS per target.
+FUZZ_SECONDS ?= 60
+fuzz:
+	@bash scripts/install-deps.sh fuzz
+	FUZZ_SECONDS=$(FUZZ_SECONDS) BUILD_JOBS=$(JOBS) bash scripts/run-fuzz.sh build-fuzz
+
 clean:
-	rm -rf $(BUILD_DIR) build-tsan build-asan build-ubsan build-asan-ubsan
+	rm -rf $(BUILD_DIR) build-tsan build-asan build-ubsan build-asan-ubsan build-fuzz

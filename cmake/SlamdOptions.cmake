@@ -18,9 +18,18 @@ if(SLAMD_SANITIZE)
     # One build for both: cheaper than two (the issue's CI budget), and they do not conflict.
     set(_slamd_san_flags -fsanitize=address,undefined -fno-sanitize-recover=undefined
                          -fno-omit-frame-pointer)
+  elseif(SLAMD_SANITIZE STREQUAL "fuzzer")
+    # The `make fuzz` tree: libFuzzer's coverage instrumentation everywhere (the fuzz programs
+    # add -fsanitize=fuzzer for libFuzzer's main), with ASan and UBSan to turn bad reads, leaks
+    # and undefined behaviour into findings. libFuzzer comes with clang only.
+    if(NOT CMAKE_CXX_COMPILER_ID STREQUAL "Clang")
+      message(FATAL_ERROR "SLAMD_SANITIZE=fuzzer needs clang (CXX=clang++): libFuzzer is clang's")
+    endif()
+    set(_slamd_san_flags -fsanitize=fuzzer-no-link,address,undefined
+                         -fno-sanitize-recover=undefined -fno-omit-frame-pointer)
   else()
     message(FATAL_ERROR "SLAMD_SANITIZE='${SLAMD_SANITIZE}': allowed values are address, thread, "
-                        "undefined, address+undefined")
+                        "undefined, address+undefined, fuzzer")
   endif()
   add_compile_options(${_slamd_san_flags} -g)
   add_link_options(${_slamd_san_flags})

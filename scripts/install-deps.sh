@@ -2,6 +2,7 @@
 # Installs the Debian 12 packages slamd needs to build, test and run. Idempotent: does nothing
 # when everything is present; otherwise runs apt-get update then installs only what is missing.
 # Uses sudo when not root. Exits non-zero with a clear message when it cannot.
+# `install-deps.sh fuzz` adds what `make fuzz` needs (clang and its libFuzzer runtime).
 set -euo pipefail
 
 PACKAGES=(
@@ -17,6 +18,9 @@ PACKAGES=(
   # benchmarks: peak memory and CPU time of each run
   time
 )
+if [ "${1:-}" = "fuzz" ]; then
+  PACKAGES+=(clang libclang-rt-14-dev)
+fi
 
 missing=()
 for pkg in "${PACKAGES[@]}"; do

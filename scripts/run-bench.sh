@@ -8,8 +8,9 @@
 #
 # Adding a case is one line in CASES below. Environment: SLAMD_DATA_DIR (default ../shared/data),
 # SLAMD_BENCH_OUT (out/bench), SLAMD_BENCH_TOLERANCE (0.25 = 25% worse is a regression),
-# SLAMD_BENCH_MICRO=0 skips the Google Benchmark programs, SLAMD_BENCH_FAIL_ON_REGRESSION=1 makes
-# a regression fail the command.
+# SLAMD_BENCH_MICRO=0 skips the Google Benchmark programs, SLAMD_BENCH_FLOOD=0 the LCM flood
+# benchmark (scripts/bench-lcm-flood.sh), SLAMD_BENCH_FAIL_ON_REGRESSION=1 makes a regression fail
+# the command.
 set -euo pipefail
 BUILD_DIR=$(cd "${1:-build}" && pwd)
 BIN="$BUILD_DIR/bin"
@@ -105,6 +106,12 @@ if [ "${SLAMD_BENCH_MICRO:-1}" != 0 ]; then
       --benchmark_out_format=json > "$OUT/$(basename "$bench").txt" 2>&1 ||
       echo "bench: $(basename "$bench") failed (see $OUT/$(basename "$bench").txt)"
   done
+fi
+
+# LCM flood: latency and memory of an lcm: source at 10x the camera's message rate.
+if [ "${SLAMD_BENCH_FLOOD:-1}" != 0 ]; then
+  OUT="$OUT/lcm_flood" bash "$ROOT/scripts/bench-lcm-flood.sh" "$BUILD_DIR" ||
+    echo "bench: the LCM flood benchmark failed (see $OUT/lcm_flood)"
 fi
 
 # Regressions against the committed baseline (same "case key value" lines inside a JSON string

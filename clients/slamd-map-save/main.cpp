@@ -79,6 +79,12 @@ int main(int argc, char** argv) {
     return kExitConfigError;
   }
 
+  for (const std::string& path :
+       removeStaleTemporaryFiles({options.value("out"), options.value("ply")})) {
+    std::cerr << "slamd-map-save: removed " << path
+              << ", a temporary file left by an interrupted save\n";
+  }
+
   std::mutex mutex;  // the LCM thread updates the replica; the main thread writes it
   MapReplica replica;
   std::int64_t full_maps = 0;

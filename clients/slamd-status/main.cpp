@@ -17,40 +17,9 @@
 #include "slamd/common/shutdown_signals.hpp"
 #include "slamd/comms/channels.hpp"
 #include "slamd/comms/lcm_bus.hpp"
+#include "slamd/comms/status_codec.hpp"
 #include "slamd/status_t.hpp"
 
-namespace {
-
-std::string renderStatus(const slamd::status_t& status, std::uint64_t malformed) {
-  std::ostringstream out;
-  char line[256];
-  std::snprintf(line, sizeof(line), "%-12s %8s %9s %9s %9s %11s %9s %8s %10s\n", "stage", "rate Hz",
-                "p50 ms", "p95 ms", "p99 ms", "queue", "drops", "errors", "processed");
-  out << line;
-  for (const auto& stage : status.stages) {
-    std::snprintf(line, sizeof(line), "%-12s %8.1f %9.2f %9.2f %9.2f %5d/%-5d %9lld %8lld %10lld\n",
-                  stage.name.c_str(), stage.rate_hz, stage.latency_p50_ms, stage.latency_p95_ms,
-                  stage.latency_p99_ms, stage.queue_depth, stage.queue_capacity,
-                  static_cast<long long>(stage.drops), static_cast<long long>(stage.errors),
-                  static_cast<long long>(stage.processed));
-    out << line;
-  }
-  std::snprintf(line, sizeof(line),
-                "end-to-end latency (capture -> pose published): p50 %.2f ms  p95 %.2f ms  p99 "
-                "%.2f ms\n",
-                status.end_to_end_p50_ms, status.end_to_end_p95_ms, status.end_to_end_p99_ms);
-  out << line;
-  out << "tracking: "
-      << slamd::trackingStateName(static_cast<slamd::TrackingState>(status.tracking_state))
-      << "   map: " << status.map_occupied_voxels << " occupied / " << status.map_total_voxels
-      << " voxels   back end: " << status.num_keyframes << " keyframes, " << status.num_loops
-      << " loops, " << status.num_relocalizations << " relocalisations\n";
-  if (!status.message.empty()) out << "note: " << status.message << "\n";
-  if (malformed) out << "(" << malformed << " malformed status messages ignored)\n";
-  return out.str();
-}
-
-}  // namespace
 
 int main(int argc, char** argv) {
   using namespace slamd;
@@ -85,7 +54,7 @@ int main(int argc, char** argv) {
       std::lock_guard<std::mutex> lock(mutex);
       if (fresh && latest) {
         if (terminal) std::cout << "\033[H\033[2J";  // home + clear: redraw in place
-        std::cout << renderStatus(*latest, bus.malformedCount(channels.status)) << std::flush;
+        std::cout << renderStatusTable(*latest, bus.malformedCount(channels.status)) << std::flush;
         fresh = false;
       }
       if (stop) break;

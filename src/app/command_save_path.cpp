@@ -2,6 +2,8 @@
 
 #include <filesystem>
 
+#include "slamd/common/log.hpp"
+
 namespace slamd {
 
 namespace {
@@ -29,7 +31,8 @@ std::string checkFileName(const std::string& name) {
 std::optional<std::string> resolveCommandSavePath(const std::string& argument,
                                                   const std::string& save_dir, std::string& error) {
   namespace fs = std::filesystem;
-  const std::string refused = "SAVE_MAP '" + argument + "' refused: ";
+  // The argument comes from any LCM peer: logged only as a printable excerpt.
+  const std::string refused = "SAVE_MAP '" + printableExcerpt(argument) + "' refused: ";
   if (save_dir.empty()) {
     error = refused + "daemon.save_dir is empty, so commands may not name a file";
     return std::nullopt;

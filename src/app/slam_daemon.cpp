@@ -76,11 +76,30 @@ struct TrackingTally {
   std::atomic<std::uint64_t> loss_frames{0};  ///< poses in the current loss
   double longest_loss_s = 0.0;
   TrackingState last_state = TrackingState::kNotInitialized;
+  // Capture gaps (a camera that stopped delivering and came back): frames more than
+  // kCaptureGapS apart in capture time, and how long after the first frame back tracking
+  // measured a pose again.
+  static constexpr double kCaptureGapS = 0.5;
+  std::uint64_t capture_gaps = 0;
+  double longest_capture_gap_s = 0.0;
+  double longest_resume_s = 0.0;
+  Utime previous_utime = -1;
+  Utime gap_return_utime = -1;  ///< first frame after a gap, until a pose is measured
 
   void record(TrackingState state, Utime utime) {
     last_state = state;
     latest_utime.store(utime, std::memory_order_relaxed);
     const bool measured = state == TrackingState::kOk || state == TrackingState::kRelocalized;
+    if (previous_utime >= 0 && utimeToSeconds(utime - previous_utime) > kCaptureGapS) {
+      ++capture_gaps;
+      longest_capture_gap_s = std::max(longest_capture_gap_s, utimeToSeconds(utime - previous_utime));
+      gap_return_utime = utime;
+    }
+    previous_utime = utime;
+    if (gap_return_utime >= 0 && measured) {
+      longest_resume_s = std::max(longest_resume_s, utimeToSeconds(utime - gap_return_utime));
+      gap_return_utime = -1;
+    }
     const bool losing = state == TrackingState::kPredicted || state == TrackingState::kLost;
     (measured                               ? tracked
      : state == TrackingState::kPredicted   ? predicted
@@ -196,6 +215,9 @@ struct SlamDaemon::Impl {
 
   DaemonSummary summary;
 
+  // --- owned by the mapping thread -------------------------------------------------------------
+  bool snapshot_failing = false;  ///< the last periodic snapshot failed
+
   Impl(Config& c, const DaemonOverrides& overrides) : config(c) {
     daemon = DaemonConfig::load(config);
     if (!overrides.source.empty()) daemon.source = overrides.source;
@@ -224,11 +246,15 @@ struct SlamDaemon::Impl {
     // The source reads its own sections (camera.*, capture.*, synthetic.*) now, so that every
     // configuration error surfaces before anything starts.
     source = createFrameSource(daemon.source, config);
+    if (overrides.wrap_source) source = overrides.wrap_source(std::move(source));
+    removeStaleTemporaryFilesOfOutputs();
   }
 
   int run(ShutdownSignals& signals);
   /// Throws ConfigError when two outputs name the same file (one would overwrite the other).
   void checkOutputsAreDistinct() const;
+  /// Removes what an earlier run killed during a save left behind ("<output>.tmp"), logged.
+  void removeStaleTemporaryFilesOfOutputs() const;
   void handleCommands(ShutdownSignals& signals);
   void publishStatus(LcmBus& bus, StatusBuilder& builder, Pipeline& pipeline, const std::string& note);
   int writeOutputs();
@@ -274,6 +300,18 @@ void SlamDaemon::Impl::checkOutputsAreDistinct() const {
                           ": one would overwrite the other");
       }
     }
+  }
+}
+
+void SlamDaemon::Impl::removeStaleTemporaryFilesOfOutputs() const {
+  const std::vector<std::string> removed = removeStaleTemporaryFiles(
+      {daemon.trajectory_out, daemon.map_out, daemon.map_save_path, daemon.groundtruth_out,
+       daemon.metrics_out, mapping_config.snapshot_path},
+      daemon.save_dir, {".bt", ".ot"});
+  for (const std::string& path : removed) {
+    SLAMD_LOG_WARN(kLog) << "removed " << path
+                         << ", a temporary file left by an interrupted save (the file it was "
+                            "replacing is intact)";
   }
 }
 
@@ -646,6 +684,7 @@ int SlamDaemon::Impl::run(ShutdownSignals& signals) {
   summary.drops += source_stats.frames_dropped + frames_dropped_paused.load() +
                    commands_dropped.load();
   summary.frames_behind_schedule = source_stats.frames_behind_schedule;
+  summary.frames_over_rate = source_stats.frames_over_rate;
   for (const auto& stage : stats) {
     if (stage.name != "tracking") continue;
     for (const auto& edge : stage.inputs) {
@@ -658,6 +697,10 @@ int SlamDaemon::Impl::run(ShutdownSignals& signals) {
   summary.poses_not_initialized = tracking_tally.not_initialized.load();
   summary.longest_loss_s = tracking_tally.longest_loss_s;
   summary.tracking_lost_at_end = tracking_tally.loss_start_utime.load() >= 0;
+  summary.capture_gaps = tracking_tally.capture_gaps;
+  summary.longest_capture_gap_s = tracking_tally.longest_capture_gap_s;
+  summary.longest_resume_s = tracking_tally.longest_resume_s;
+  summary.resumed_after_last_gap = tracking_tally.gap_return_utime < 0;
   summary.malformed_commands = bus->malformedCount(channels.command);
   summary.commands_refused = commands_refused.load();
   if (summary.commands_refused > 0) {
@@ -724,6 +767,16 @@ void SlamDaemon::Impl::logTrackingSummary() const {
   } else {
     SLAMD_LOG_INFO(kLog) << line.str() << "; tracking OK throughout";
   }
+  if (summary.capture_gaps > 0) {
+    std::ostringstream gaps;
+    gaps.precision(2);
+    gaps << std::fixed << "capture: " << summary.capture_gaps
+         << " gaps in the camera's frames (longest " << summary.longest_capture_gap_s
+         << " s); tracking measured again at most " << summary.longest_resume_s
+         << " s after the frames returned";
+    if (!summary.resumed_after_last_gap) gaps << ", but NOT after the last gap";
+    SLAMD_LOG_WARN(kLog) << gaps.str();
+  }
 }
 
 void SlamDaemon::Impl::logDropSummary(const std::vector<StageStats>& stats,
@@ -739,9 +792,14 @@ void SlamDaemon::Impl::logDropSummary(const std::vector<StageStats>& stats,
          << " frames passed over by the source, behind its real-time schedule (reading, decoding "
             "or rendering, or the CPU it shares, was too slow)";
   }
-  if (source_stats.frames_dropped > source_stats.frames_behind_schedule) {
-    line << "; " << source_stats.frames_dropped - source_stats.frames_behind_schedule
-         << " lost by the source (device or receive buffer overflow)";
+  if (source_stats.frames_over_rate > 0) {
+    line << "; " << source_stats.frames_over_rate
+         << " received faster than a camera sends them (capture.lcm.max_rate_hz), not decoded";
+  }
+  const std::uint64_t lost = source_stats.frames_dropped - source_stats.frames_behind_schedule -
+                             source_stats.frames_over_rate;
+  if (lost > 0) {
+    line << "; " << lost << " lost by the source (device or receive buffer overflow)";
   }
   for (const auto& stage : stats) {
     std::uint64_t dropped = 0;
@@ -775,10 +833,17 @@ bool SlamDaemon::Impl::writeMetrics(const std::vector<StageStats>& stats,
   json.key("poses_lost").value(static_cast<std::int64_t>(summary.poses_lost));
   json.key("longest_loss_s").value(summary.longest_loss_s);
   json.key("tracking_lost_at_end").value(summary.tracking_lost_at_end);
+  json.key("capture_gaps").value(static_cast<std::int64_t>(summary.capture_gaps));
+  json.key("longest_capture_gap_s").value(summary.longest_capture_gap_s);
+  json.key("longest_resume_s").value(summary.longest_resume_s);
+  json.key("resumed_after_last_gap").value(summary.resumed_after_last_gap);
   json.key("frames_behind_schedule").value(static_cast<std::int64_t>(summary.frames_behind_schedule));
+  json.key("frames_over_rate").value(static_cast<std::int64_t>(summary.frames_over_rate));
   json.key("frames_dropped_before_tracking")
       .value(static_cast<std::int64_t>(summary.frames_dropped_before_tracking));
   json.key("drops").value(static_cast<std::int64_t>(summary.drops));
+  json.key("malformed_commands").value(static_cast<std::int64_t>(summary.malformed_commands));
+  json.key("commands_refused").value(static_cast<std::int64_t>(summary.commands_refused));
   json.key("errors").value(static_cast<std::int64_t>(summary.errors));
   json.key("duration_s").value(summary.duration_s);
   json.key("fps").value(summary.duration_s > 0
@@ -818,8 +883,17 @@ void SlamDaemon::Impl::publishMapOutputs(LcmBus& bus, const MapperOutputs& outpu
     bus.publishMessage(channels.map_update, toMapUpdateMessage(*outputs.update));
   }
   if (outputs.full_map) bus.publishMessage(channels.map, toFullMapMessage(*outputs.full_map));
-  if (outputs.snapshot && !outputs.snapshot->ok) {
-    SLAMD_LOG_WARN(kLog) << "map snapshot failed: " << outputs.snapshot->error;
+  if (outputs.snapshot) {
+    // Logged on each change between failing and succeeding, so a full disk gives one line per
+    // retry and one when it recovers, not one per period forever.
+    if (!outputs.snapshot->ok) {
+      SLAMD_LOG_WARN(kLog) << "map snapshot failed (kept in memory, the previous snapshot is "
+                              "intact; retrying): "
+                           << outputs.snapshot->error;
+    } else if (snapshot_failing) {
+      SLAMD_LOG_INFO(kLog) << "map snapshot written again: " << outputs.snapshot->path;
+    }
+    snapshot_failing = !outputs.snapshot->ok;
   }
 }
 

@@ -97,42 +97,6 @@ cv::Mat decodeUnchanged(const std::uint8_t* data, std::size_t size, std::string&
 
 }  // namespace
 
-bool readFileBytes(const std::string& path, std::vector<std::uint8_t>& bytes, std::string& error) {
-  // Only regular files: a FIFO would block the reader forever and a directory "opens" with an
-  // absurd size. The check follows symbolic links, as opening does.
-  std::error_code status_error;
-  const auto status = std::filesystem::status(path, status_error);
-  if (status_error) {
-    error = "cannot open " + path + ": " + status_error.message();
-    return false;
-  }
-  if (status.type() != std::filesystem::file_type::regular) {
-    error = path + " is not a regular file (" +
-            (status.type() == std::filesystem::file_type::directory ? std::string("a directory")
-             : status.type() == std::filesystem::file_type::fifo    ? std::string("a FIFO")
-                                                                    : std::string("a special file")) +
-            ")";
-    return false;
-  }
-  std::ifstream in(path, std::ios::binary | std::ios::ate);
-  if (!in) {
-    error = "cannot open " + path;
-    return false;
-  }
-  const std::streamoff size = in.tellg();
-  if (size <= 0) {
-    error = path + " is empty";
-    return false;
-  }
-  bytes.resize(static_cast<std::size_t>(size));
-  in.seekg(0);
-  if (!in.read(reinterpret_cast<char*>(bytes.data()), size)) {
-    error = "cannot read " + path;
-    return false;
-  }
-  return true;
-}
-
 bool looksLikeJpeg(const std::uint8_t* data, std::size_t size) {
   return size >= 3 && data[0] == 0xFF && data[1] == 0xD8 && data[2] == 0xFF;
 }

@@ -29,6 +29,12 @@ void SourceCounters::droppedBehindSchedule() {
   ++stats_.frames_behind_schedule;
 }
 
+void SourceCounters::droppedOverRate() {
+  std::lock_guard<std::mutex> lock(mutex_);
+  ++stats_.frames_dropped;
+  ++stats_.frames_over_rate;
+}
+
 void SourceCounters::reanchored() {
   std::lock_guard<std::mutex> lock(mutex_);
   ++stats_.clock_reanchors;

@@ -9,7 +9,7 @@
 #include <fstream>
 #include <sstream>
 
-#include <opencv2/core.hpp>
+#include "slamd/common/yaml_subset.hpp"
 
 namespace slamd {
 
@@ -23,8 +23,8 @@ std::string trim(const std::string& text) {
 }
 
 // Bounds on configuration text, far above any real configuration (slamd's own files are a few
-// kB, three levels deep): OpenCV's YAML parser recurses once per level and would overflow the
-// stack on a file nested 50,000 deep.
+// kB, three levels deep). Nesting is checked before reading, so that even flow collections
+// ("[[[[...") are refused as too deep rather than as unsupported.
 constexpr std::size_t kMaxConfigBytes = 1 << 20;
 constexpr int kMaxConfigNesting = 64;
 
@@ -67,47 +67,6 @@ std::string formatDouble(double value) {
   return buffer;
 }
 
-// cv::FileStorage keeps an inline comment ("false  # explanation") as part of an unquoted
-// string value; in YAML a '#' after whitespace starts a comment, so it is cut off here.
-std::string withoutInlineComment(const std::string& text) {
-  for (std::size_t i = 1; i < text.size(); ++i) {
-    if (text[i] == '#' && (text[i - 1] == ' ' || text[i - 1] == '\t')) {
-      const auto end = text.find_last_not_of(" \t", i - 1);
-      return end == std::string::npos ? "" : text.substr(0, end + 1);
-    }
-  }
-  return text;
-}
-
-std::string scalarText(const cv::FileNode& node) {
-  if (node.isInt()) return std::to_string(static_cast<int>(node));
-  if (node.isReal()) return formatDouble(static_cast<double>(node));
-  if (node.isString()) return withoutInlineComment(static_cast<std::string>(node));
-  return "";
-}
-
-void flatten(const cv::FileNode& node, const std::string& prefix,
-             std::map<std::string, std::string>& out) {
-  if (node.isMap()) {
-    for (auto it = node.begin(); it != node.end(); ++it) {
-      const cv::FileNode child = *it;
-      const std::string key = prefix.empty() ? child.name() : prefix + "." + child.name();
-      flatten(child, key, out);
-    }
-  } else if (node.isSeq()) {
-    std::string text = "[";
-    bool first = true;
-    for (auto it = node.begin(); it != node.end(); ++it) {
-      if (!first) text += ", ";
-      text += scalarText(*it);
-      first = false;
-    }
-    out[prefix] = text + "]";
-  } else if (!prefix.empty()) {
-    out[prefix] = scalarText(node);
-  }
-}
-
 bool parseDouble(const std::string& text, double& value) {
   const std::string t = trim(text);
   if (t.empty()) return false;
@@ -128,14 +87,6 @@ std::string lower(std::string text) {
   std::transform(text.begin(), text.end(), text.begin(),
                  [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
   return text;
-}
-
-Config parseStorage(cv::FileStorage& storage) {
-  Config config;
-  std::map<std::string, std::string> values;
-  flatten(storage.root(), "", values);
-  for (const auto& [key, value] : values) config.set(key, value);
-  return config;
 }
 
 }  // namespace
@@ -182,18 +133,8 @@ Config Config::fromYamlString(const std::string& yaml_text) {
     throw ConfigError("configuration text is nested more than " +
                       std::to_string(kMaxConfigNesting) + " levels deep");
   }
-  cv::FileStorage storage;
-  std::string text = yaml_text;
-  // cv::FileStorage recognises YAML in memory by its directive.
-  if (text.rfind("%YAML", 0) != 0) text = "%YAML:1.0\n---\n" + text;
-  try {
-    if (!storage.open(text, cv::FileStorage::READ | cv::FileStorage::MEMORY)) {
-      throw ConfigError("cannot parse configuration text");
-    }
-  } catch (const cv::Exception& e) {
-    throw ConfigError("cannot parse configuration text: " + e.err);
-  }
-  Config config = parseStorage(storage);
+  Config config;
+  for (const auto& [key, value] : readYamlSubset(yaml_text)) config.set(key, value);
   config.origin_ = "<string>";
   return config;
 }

@@ -6,6 +6,7 @@
 #include <cerrno>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <streambuf>
 #include <vector>
 
@@ -77,11 +78,17 @@ bool writeThrough(int fd, const std::function<bool(std::ostream&)>& writer, std:
     why = std::string("writer threw: ") + e.what();
   }
   stream.flush();
+  // A failed write comes first: a writer that checks its stream (OctoMap's) gives up because
+  // of it, and the reason to report is the system's ("No space left on device").
+  if (buffer.failed()) {
+    why = "write failed: " + errnoText(buffer.savedErrno());
+    return false;
+  }
   if (!accepted) {
     if (why.empty()) why = "the writer abandoned the content";
     return false;
   }
-  if (buffer.failed() || !stream.good()) {
+  if (!stream.good()) {
     why = "write failed: " + errnoText(buffer.savedErrno());
     return false;
   }
@@ -152,6 +159,73 @@ bool writeOutputFile(const std::string& path, const std::function<bool(std::ostr
     why = "close failed: " + errnoText(errno);
   }
   return ok || fail(error, "cannot write " + path + ": " + why);
+}
+
+std::vector<std::string> removeStaleTemporaryFiles(const std::vector<std::string>& output_paths,
+                                                   const std::string& folder,
+                                                   const std::vector<std::string>& suffixes) {
+  namespace fs = std::filesystem;
+  std::vector<std::string> candidates;
+  for (const std::string& path : output_paths) {
+    if (!path.empty()) candidates.push_back(temporaryPathFor(path));
+  }
+  std::error_code error;
+  if (!folder.empty() && fs::is_directory(folder, error)) {
+    const std::string tmp_suffix = temporaryPathFor("");
+    for (const auto& entry : fs::directory_iterator(folder, error)) {
+      const std::string name = entry.path().filename().string();
+      for (const std::string& suffix : suffixes) {
+        const std::string ending = suffix + tmp_suffix;
+        if (name.size() > ending.size() &&
+            name.compare(name.size() - ending.size(), ending.size(), ending) == 0) {
+          candidates.push_back(entry.path().string());
+        }
+      }
+    }
+  }
+  std::vector<std::string> removed;
+  for (const std::string& candidate : candidates) {
+    if (fs::is_regular_file(fs::symlink_status(candidate, error)) && fs::remove(candidate, error)) {
+      removed.push_back(candidate);
+    }
+  }
+  return removed;
+}
+
+bool readFileBytes(const std::string& path, std::vector<std::uint8_t>& bytes, std::string& error) {
+  // Only regular files: a FIFO would block the reader forever and a directory "opens" with an
+  // absurd size. The check follows symbolic links, as opening does.
+  std::error_code status_error;
+  const auto status = std::filesystem::status(path, status_error);
+  if (status_error) {
+    error = "cannot open " + path + ": " + status_error.message();
+    return false;
+  }
+  if (status.type() != std::filesystem::file_type::regular) {
+    error = path + " is not a regular file (" +
+            (status.type() == std::filesystem::file_type::directory ? std::string("a directory")
+             : status.type() == std::filesystem::file_type::fifo    ? std::string("a FIFO")
+                                                                    : std::string("a special file")) +
+            ")";
+    return false;
+  }
+  std::ifstream in(path, std::ios::binary | std::ios::ate);
+  if (!in) {
+    error = "cannot open " + path;
+    return false;
+  }
+  const std::streamoff size = in.tellg();
+  if (size <= 0) {
+    error = path + " is empty";
+    return false;
+  }
+  bytes.resize(static_cast<std::size_t>(size));
+  in.seekg(0);
+  if (!in.read(reinterpret_cast<char*>(bytes.data()), size)) {
+    error = "cannot read " + path;
+    return false;
+  }
+  return true;
 }
 
 }  // namespace slamd

@@ -71,6 +71,7 @@ LcmFrameSourceConfig LcmFrameSourceConfig::load(Config& config) {
   out.max_time_jump_s =
       config.getDouble("capture.lcm.max_time_jump_s", out.max_time_jump_s, 1e-3, 86400.0);
   out.reanchor_frames = config.getInt("capture.lcm.reanchor_frames", out.reanchor_frames, 1, 1000);
+  out.max_rate_hz = config.getDouble("capture.lcm.max_rate_hz", out.max_rate_hz, 0.0, 1000.0);
   out.camera = CameraConfig::load(config, 1000.0);
   return out;
 }
@@ -151,6 +152,37 @@ FrameRead LcmFrameSource::next(std::chrono::milliseconds timeout) {
   }
 }
 
+std::optional<FrameRead> LcmFrameSource::checkTiming(Utime utime, std::int64_t arrival_steady_ns,
+                                                     const std::string& what) {
+  switch (clock_.check(utime, arrival_steady_ns)) {
+    case StreamClock::Verdict::kAccept:
+      break;
+    case StreamClock::Verdict::kReject: {
+      std::ostringstream text;
+      text << what << ": timestamp " << utime << " us is " << clock_.lastJumpS()
+           << " s off the stream's clock (rejected; " << config_.reanchor_frames
+           << " agreeing frames in a row re-anchor it)";
+      return skipFrame(counters_, kComponent, text.str());
+    }
+    case StreamClock::Verdict::kReanchor:
+      SLAMD_LOG_WARN(kComponent) << channel_ << ": the source's clock jumped by "
+                                 << clock_.lastJumpS() << " s; re-anchored after "
+                                 << config_.reanchor_frames << " agreeing frames";
+      counters_.reanchored();
+      gate_.reset();
+      last_delivered_utime_.reset();
+      return std::nullopt;
+  }
+  // More frames than a camera sends (a flood of valid frames): dropped before their images are
+  // decoded, and counted. Older or equal stamps are left to the gate, which names them.
+  if (config_.max_rate_hz > 0.0 && last_delivered_utime_ && utime > *last_delivered_utime_ &&
+      utimeToSeconds(utime - *last_delivered_utime_) < kMinIntervalFraction / config_.max_rate_hz) {
+    counters_.droppedOverRate();
+    return FrameRead{FrameRead::Status::kTimeout, {}, {}};
+  }
+  return std::nullopt;
+}
+
 FrameRead LcmFrameSource::decode(const RawMessage& message) {
   const std::string what = "LCM message #" + std::to_string(message.number) + " on " + channel_;
   const bool is_rgbd = hasFingerprint(message.bytes, slamd::rgbd_frame_t::getHash());
@@ -164,6 +196,9 @@ FrameRead LcmFrameSource::decode(const RawMessage& message) {
       auto decoded =
           decodeMessage<slamd::rgbd_frame_t>(message.bytes.data(), message.bytes.size(), &error);
       if (!decoded) return skipFrame(counters_, kComponent, what + ": " + error);
+      if (auto refused = checkTiming(decoded->utime, message.arrival_steady_ns, what)) {
+        return std::move(*refused);
+      }
       if (decoded->color_encoding == slamd::rgbd_frame_t::COLOR_JPEG) {
         error = strictJpegToRaw(decoded->color_data, false, decoded->width, decoded->height);
         if (!error.empty()) return skipFrame(counters_, kComponent, what + ": " + error);
@@ -175,6 +210,11 @@ FrameRead LcmFrameSource::decode(const RawMessage& message) {
       auto decoded =
           decodeMessage<kinect::frame_msg_t>(message.bytes.data(), message.bytes.size(), &error);
       if (!decoded) return skipFrame(counters_, kComponent, what + ": " + error);
+      const Utime utime =
+          decoded->image.timestamp != 0 ? decoded->image.timestamp : decoded->timestamp;
+      if (auto refused = checkTiming(utime, message.arrival_steady_ns, what)) {
+        return std::move(*refused);
+      }
       if (decoded->image.image_data_format == kinect::image_msg_t::VIDEO_RGB_JPEG) {
         error = strictJpegToRaw(decoded->image.image_data, true, decoded->image.width,
                                 decoded->image.height);
@@ -198,29 +238,14 @@ FrameRead LcmFrameSource::decode(const RawMessage& message) {
     // FrameDecodeError (inconsistent fields, corrupt images) and anything the decoders throw.
     return skipFrame(counters_, kComponent, what + ": " + e.what());
   }
-  frame->received_steady_ns = steadyNowNs();
+  // The frame entered slamd when LCM delivered it: time spent waiting in the receive queue and
+  // decoding counts towards capture-to-pose latency.
+  frame->received_steady_ns = message.arrival_steady_ns;
   if (frame->sequence == 0) frame->sequence = sequence_;
   ++sequence_;
-  switch (clock_.check(frame->utime, message.arrival_steady_ns)) {
-    case StreamClock::Verdict::kAccept:
-      break;
-    case StreamClock::Verdict::kReject: {
-      std::ostringstream text;
-      text << what << ": timestamp " << frame->utime << " us is " << clock_.lastJumpS()
-           << " s off the stream's clock (rejected; " << config_.reanchor_frames
-           << " agreeing frames in a row re-anchor it)";
-      return skipFrame(counters_, kComponent, text.str());
-    }
-    case StreamClock::Verdict::kReanchor:
-      SLAMD_LOG_WARN(kComponent) << channel_ << ": the source's clock jumped by "
-                                 << clock_.lastJumpS() << " s; re-anchored after "
-                                 << config_.reanchor_frames << " agreeing frames";
-      counters_.reanchored();
-      gate_.reset();
-      break;
-  }
   const std::string gate_error = gate_.check(*frame, what);
   if (!gate_error.empty()) return skipFrame(counters_, kComponent, gate_error);
+  last_delivered_utime_ = frame->utime;
   counters_.frameRead();
   return FrameRead{FrameRead::Status::kFrame, std::move(frame), {}};
 }

@@ -17,21 +17,6 @@ bool goodResolution(double resolution_m) {
   return std::isfinite(resolution_m) && resolution_m > 1e-4 && resolution_m < 100.0;
 }
 
-/// Walks one node of the binary stream (two bytes: 2 bits per child, 11 = has children).
-bool walkNode(const std::uint8_t* data, std::size_t size, std::size_t& pos, unsigned depth) {
-  if (size - pos < 2) return false;
-  const std::uint8_t bytes[2] = {data[pos], data[pos + 1]};
-  pos += 2;
-  for (unsigned child = 0; child < 8; ++child) {
-    const unsigned bits = (bytes[child / 4] >> (2 * (child % 4))) & 3u;
-    if (bits != 3u) continue;
-    // The root is depth 0 and leaves are at depth 16: only nodes above 15 have grandchildren.
-    if (depth + 1 >= 16) return false;
-    if (!walkNode(data, size, pos, depth + 1)) return false;
-  }
-  return true;
-}
-
 }  // namespace
 
 slamd::voxel_map_update_t toMapUpdateMessage(const MapUpdate& update) {
@@ -109,18 +94,6 @@ std::optional<FullMap> fromFullMapMessage(const slamd::voxel_map_t& message, std
   return map;
 }
 
-bool validateOctreeBinary(const std::uint8_t* data, std::size_t size, std::string* error) {
-  if (size == 0) return true;  // an empty map
-  std::size_t pos = 0;
-  if (!walkNode(data, size, pos, 0)) {
-    return fail(error, "octree stream is truncated or deeper than 16 levels");
-  }
-  if (pos != size) {
-    return fail(error, "octree stream has " + std::to_string(size - pos) + " trailing bytes");
-  }
-  return true;
-}
-
 std::unique_ptr<octomap::OcTree> fullMapToOcTree(const FullMap& map, std::string* error) {
   if (!goodResolution(map.resolution_m)) {
     fail(error, "full map: bad resolution");
@@ -137,8 +110,14 @@ std::unique_ptr<octomap::OcTree> fullMapToOcTree(const FullMap& map, std::string
 std::size_t applyMapUpdate(const MapUpdate& update, octomap::OcTree& tree) {
   std::size_t applied = 0;
   for (const VoxelChange& voxel : update.voxels) {
-    // Checked again here: a NaN coordinate is undefined behaviour in OctoMap's coordToKey.
-    if (!voxel.center_m.allFinite() || !std::isfinite(voxel.log_odds)) continue;
+    // Checked here, before OctoMap's coordToKey: it converts to int without a range check, so a
+    // NaN or a coordinate far outside the tree (found by fuzzing: 2.7e24 m) is undefined
+    // behaviour. The tree spans +-resolution * 2^15 around the origin on each axis.
+    const double extent_m = tree.getResolution() * 32768.0;
+    if (!voxel.center_m.allFinite() || !std::isfinite(voxel.log_odds) ||
+        (voxel.center_m.cast<double>().array().abs() >= extent_m).any()) {
+      continue;
+    }
     octomap::OcTreeKey key;
     if (!tree.coordToKeyChecked(octomap::point3d(voxel.center_m.x(), voxel.center_m.y(),
                                                  voxel.center_m.z()),

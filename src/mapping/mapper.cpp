@@ -12,6 +12,9 @@
 
 #include <octomap/AbstractOcTree.h>
 
+#include "slamd/common/file_io.hpp"
+#include "slamd/mapping/octree_stream.hpp"
+
 namespace slamd {
 
 namespace {
@@ -556,8 +559,27 @@ MapperOutputs Mapper::poll(Utime now) {
     out.full_map = fullMap();
     full_map_requested_ = false;
   }
-  if (!config_.snapshot_path.empty() && due(last_snapshot_time_, config_.snapshot_period_s, false)) {
-    out.snapshot = saveSnapshot();
+  if (!config_.snapshot_path.empty()) {
+    // A failed snapshot (a full disk, a folder gone) is retried sooner than the next period:
+    // after 1 s, then 2, 4, ... up to the period. The map stays in memory meanwhile, and the
+    // previous snapshot file stays intact (writes go through a temporary file).
+    // While failing, the retry schedule replaces the period.
+    const bool retry_due = snapshot_retry_at_ && now >= *snapshot_retry_at_;
+    if (retry_due ||
+        (!snapshot_retry_at_ && due(last_snapshot_time_, config_.snapshot_period_s, false))) {
+      if (retry_due) ++stats_.snapshot_retries;
+      out.snapshot = saveSnapshot();
+      if (out.snapshot->ok) {
+        last_snapshot_time_ = now;
+        snapshot_retry_at_.reset();
+        snapshot_retry_delay_s_ = kFirstSnapshotRetryDelayS;
+      } else {
+        snapshot_retry_at_ = now + static_cast<Utime>(snapshot_retry_delay_s_ * 1e6);
+        snapshot_retry_delay_s_ =
+            std::min(2.0 * snapshot_retry_delay_s_,
+                     std::max(config_.snapshot_period_s, kFirstSnapshotRetryDelayS));
+      }
+    }
   }
   return out;
 }
@@ -754,12 +776,30 @@ MapFileResult Mapper::loadMap(const std::string& path) {
   const std::string extension = extensionOf(path);
   std::unique_ptr<octomap::OcTree> plain;
   std::unique_ptr<octomap::ColorOcTree> colored;
-  if (extension == ".bt") {
-    std::ifstream in(path, std::ios::binary);
-    if (!in) {
-      result.error = "cannot open " + path;
-      return result;
-    }
+  if (extension != ".bt" && extension != ".ot") {
+    result.error = path + ": map files must end in .bt or .ot";
+    return result;
+  }
+  // The file is read whole and checked before OctoMap's reader, which trusts its input, sees it.
+  std::vector<std::uint8_t> bytes;
+  OctomapFileHeader header;
+  std::string problem;
+  if (!readFileBytes(path, bytes, problem)) {
+    result.error = problem;
+    return result;
+  }
+  if (!checkOctomapFile(bytes.data(), bytes.size(), header, &problem)) {
+    result.error = path + ": " + problem;
+    return result;
+  }
+  if (header.binary != (extension == ".bt")) {
+    result.error = path + ": the file holds a " + (header.binary ? ".bt" : ".ot") +
+                   " map but is named " + extension;
+    return result;
+  }
+  std::istringstream in(std::string(bytes.begin(), bytes.end()), std::ios::binary);
+  bytes = {};
+  if (header.binary) {
     bool ok = false;
     if (config_.color) {
       colored = std::make_unique<octomap::ColorOcTree>(config_.resolution_m);
@@ -772,12 +812,8 @@ MapFileResult Mapper::loadMap(const std::string& path) {
       result.error = path + " is not a readable OctoMap binary (.bt) file";
       return result;
     }
-  } else if (extension == ".ot") {
-    if (!std::filesystem::is_regular_file(path)) {
-      result.error = "cannot open " + path;
-      return result;
-    }
-    std::unique_ptr<octomap::AbstractOcTree> any(octomap::AbstractOcTree::read(path));
+  } else {
+    std::unique_ptr<octomap::AbstractOcTree> any(octomap::AbstractOcTree::read(in));
     if (auto* p = dynamic_cast<octomap::ColorOcTree*>(any.get())) {
       any.release();
       colored.reset(p);
@@ -788,9 +824,6 @@ MapFileResult Mapper::loadMap(const std::string& path) {
       result.error = path + " is not a readable OcTree or ColorOcTree (.ot) file";
       return result;
     }
-  } else {
-    result.error = path + ": map files must end in .bt or .ot";
-    return result;
   }
   tree_ = std::move(plain);
   color_tree_ = std::move(colored);

@@ -203,5 +203,57 @@ TEST(Config, EveryShippedConfigFileParses) {
   EXPECT_GE(files, 6);
 }
 
+// Fuzzing found text on which cv::FileStorage, the previous reader, looped forever; slamd now
+// reads its YAML subset itself and refuses everything else with the line.
+TEST(Config, TextTheOldParserHungOnIsRefusedAtOnce) {
+  try {
+    Config::fromYamlString(" t:0\n2, -\nb");
+    ADD_FAILURE() << "no error";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("line 1"), std::string::npos) << e.what();
+  }
+}
+
+TEST(Config, YamlSubsetReadsNestingSequencesAndQuotes) {
+  Config config = Config::fromYamlString(
+      "%YAML:1.0\n---\na:\n  b:\n    c: 1   # comment\n  list: [1, 2,\n         3]\n"
+      "  items:\n    - x\n    - 'y z'\n  same_indent:\n  - 4\n  - 5\n  quoted: \"q: #r\"\n"
+      "  empty:\nd: 2\n...\nignored: after the end marker\n");
+  EXPECT_EQ(config.getInt("a.b.c", 0, 0, 10), 1);
+  EXPECT_EQ(config.getString("a.list", ""), "[1, 2, 3]");
+  EXPECT_EQ(config.getString("a.items", ""), "[x, y z]");
+  EXPECT_EQ(config.getString("a.same_indent", ""), "[4, 5]");
+  EXPECT_EQ(config.getString("a.quoted", ""), "q: #r");
+  EXPECT_EQ(config.getString("a.empty", "default"), "");
+  EXPECT_EQ(config.getInt("d", 0, 0, 10), 2);
+  EXPECT_FALSE(config.has("ignored"));
+}
+
+TEST(Config, YamlOutsideTheSubsetIsRefusedNamingTheLine) {
+  const std::pair<std::string, std::string> cases[] = {
+      {"a: 1\nb: &anchor 2\n", "line 2"},          // anchors
+      {"a:\n\tb: 1\n", "line 2: a tab"},            // tab indentation
+      {"a: {b: 1}\n", "line 1"},                    // flow mapping
+      {"a: [1, [2, 3]]\n", "line 1: nested"},       // nested sequence
+      {"a: [1, 2\n", "never closed"},               // unclosed
+      {"a: 1\na: 2\n", "given twice"},              // duplicate key
+      {"a: 1\n  b: 2\n", "line 2: unexpected indentation"},
+      {"a: \"open\n", "unclosed quote"},
+      {"a: 1\x01\n", "control character"},
+      {std::string("a: 1\0b\n", 7), "line 1: control character 0"},
+      {"- a\n", "list item where a key"},
+      {"a b: 1\n", "expected 'key: value'"},
+  };
+  for (const auto& [text, expected] : cases) {
+    try {
+      Config::fromYamlString(text);
+      ADD_FAILURE() << "no error for: " << text;
+    } catch (const ConfigError& e) {
+      EXPECT_NE(std::string(e.what()).find(expected), std::string::npos)
+          << "for " << text << ": " << e.what();
+    }
+  }
+}
+
 }  // namespace
 }  // namespace slamd

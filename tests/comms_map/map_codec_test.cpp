@@ -216,5 +216,18 @@ TEST(MapCodec, MalformedMessagesAreRejectedWithoutCrashing) {
   EXPECT_EQ(replica.applyUpdate(other), MapReplica::UpdateResult::kRejected);
 }
 
+// Found by fuzzing: OctoMap converts coordinates to keys without a range check, so a voxel
+// centre far outside the tree (2.7e24 m in a received update) was undefined behaviour.
+TEST(MapCodec, VoxelsOutsideTheTreesExtentAreSkipped) {
+  MapUpdate update;
+  update.resolution_m = 0.05;
+  update.voxels.push_back({Eigen::Vector3f(2.7e24f, 0.0f, 0.0f), 1.0f});
+  update.voxels.push_back({Eigen::Vector3f(0.0f, -2.4e9f, 0.0f), 1.0f});
+  update.voxels.push_back({Eigen::Vector3f(0.0f, 0.0f, 1639.0f), 1.0f});  // 0.05 * 2^15 = 1638.4
+  update.voxels.push_back({Eigen::Vector3f(1.0f, 2.0f, 3.0f), 1.0f});
+  octomap::OcTree tree(0.05);
+  EXPECT_EQ(applyMapUpdate(update, tree), 1u);
+}
+
 }  // namespace
 }  // namespace slamd

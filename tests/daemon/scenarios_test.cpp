@@ -80,5 +80,15 @@ TEST_F(DaemonScenario, AnIdleLcmSourceCountsOnlyRealFrames) {
   EXPECT_EQ(run("idle_lcm_source", &log), 0) << log;
 }
 
+TEST_F(DaemonScenario, AFloodOfTenTimesTheMessageRateIsCountedAndMemoryStaysFlat) {
+  std::string log;
+  EXPECT_EQ(run("lcm_flood", &log), 0) << log;
+}
+
+TEST_F(DaemonScenario, AFullDiskKeepsTheLastSnapshotAndTheSaveIsRetried) {
+  std::string log;
+  EXPECT_EQ(run("full_disk", &log), 0) << log;
+}
+
 }  // namespace
 }  // namespace slamd

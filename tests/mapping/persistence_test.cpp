@@ -213,5 +213,66 @@ TEST(MapPersistence, ASnapshotKilledMidWriteLeavesThePreviousSnapshotIntact) {
   fs::remove_all(dir);
 }
 
+TEST(MapPersistence, AFailedSnapshotIsRetriedSoonerThanThePeriodUntilItSucceeds) {
+  const auto dir = test::makeTempDir("snapshot-retry");
+  MappingConfig config = quietConfig();
+  config.snapshot_path = (dir / "gone" / "snapshot.bt").string();  // the folder is missing
+  config.snapshot_period_s = 30.0;
+  Mapper mapper(config);
+  mapSomeRoom(mapper, 2);
+  const Utime t0 = 1'000'000;
+  ASSERT_FALSE(mapper.poll(t0).snapshot.has_value());  // starts the clock
+  const MapperOutputs first = mapper.poll(t0 + 30'000'000);
+  ASSERT_TRUE(first.snapshot.has_value());
+  EXPECT_FALSE(first.snapshot->ok);
+  EXPECT_NE(first.snapshot->error.find("No such file or directory"), std::string::npos)
+      << first.snapshot->error;
+  // Retries after 1 s, then 2 s (not after the 30 s period), and nothing in between.
+  EXPECT_FALSE(mapper.poll(t0 + 30'500'000).snapshot.has_value());
+  const MapperOutputs retry1 = mapper.poll(t0 + 31'000'000);
+  ASSERT_TRUE(retry1.snapshot.has_value());
+  EXPECT_FALSE(retry1.snapshot->ok);
+  EXPECT_FALSE(mapper.poll(t0 + 32'500'000).snapshot.has_value());
+  fs::create_directories(dir / "gone");
+  const MapperOutputs retry2 = mapper.poll(t0 + 33'000'000);
+  ASSERT_TRUE(retry2.snapshot.has_value());
+  EXPECT_TRUE(retry2.snapshot->ok) << retry2.snapshot->error;
+  EXPECT_EQ(mapper.stats().snapshot_retries, 2);
+  EXPECT_EQ(mapper.stats().snapshot_failures, 2);
+  // Back to the period.
+  EXPECT_FALSE(mapper.poll(t0 + 40'000'000).snapshot.has_value());
+  EXPECT_TRUE(mapper.poll(t0 + 63'000'000).snapshot.has_value());
+  fs::remove_all(dir);
+}
+
+// OctoMap's readers trust their input: a stream whose every node claims children made them recurse
+// without bound. Map files are checked first (octree_stream.hpp) and refused with the reason.
+TEST(MapPersistence, CorruptMapFilesAreRefusedWithAReasonNotACrash) {
+  const auto dir = test::makeTempDir("corrupt-map");
+  const std::string header = "# Octomap OcTree binary file\nid OcTree\nsize 1\nres 0.05\ndata\n";
+  const std::pair<std::string, std::string> files[] = {
+      {"deep.bt", header + std::string(200000, '\xff')},
+      {"truncated.bt", header + std::string("\xc0\x00", 2)},
+      {"no-newline.bt", "# Octomap OcTree binary file\nid OcTree\nres 0.05\ndata"},
+      {"bad-res.bt", "# Octomap OcTree binary file\nid OcTree\nres nan\ndata\n"},
+      {"wrong-kind.bt", "# Octomap OcTree file\nid OcTree\nres 0.05\ndata\n"},
+      {"other-tree.ot", "# Octomap OcTree file\nid CountingOcTree\nres 0.05\ndata\n"},
+      {"not-a-map.bt", "hello"},
+  };
+  for (const auto& [name, content] : files) {
+    const auto path = dir / name;
+    std::ofstream(path, std::ios::binary) << content;
+    MappingConfig config = quietConfig();
+    config.load_path = path.string();
+    try {
+      Mapper mapper(config);
+      ADD_FAILURE() << name << " loaded";
+    } catch (const std::runtime_error& e) {
+      EXPECT_NE(std::string(e.what()).find(name), std::string::npos) << e.what();
+    }
+  }
+  fs::remove_all(dir);
+}
+
 }  // namespace
 }  // namespace slamd

@@ -14,6 +14,7 @@
 // its own receive thread (commands only: it pushes them into a queue); the calling thread runs
 // the control loop (commands, 1 Hz status) and, after the pipeline has stopped, writes outputs.
 
+#include <functional>
 #include <memory>
 #include <string>
 
@@ -21,6 +22,8 @@
 #include "slamd/common/shutdown_signals.hpp"
 
 namespace slamd {
+
+class FrameSource;
 
 /// Command-line values that take precedence over the configuration file.
 struct DaemonOverrides {
@@ -30,6 +33,9 @@ struct DaemonOverrides {
   std::string map_out;         ///< --map-out
   std::string groundtruth_out;  ///< --groundtruth-out
   std::string metrics_out;      ///< --metrics-out
+  /// Wraps the source the configuration names (tests: fault injection such as a camera that
+  /// drops out); empty = none.
+  std::function<std::unique_ptr<FrameSource>(std::unique_ptr<FrameSource>)> wrap_source;
 };
 
 /// What a finished run did (logged at exit, returned for tests).
@@ -46,8 +52,15 @@ struct DaemonSummary {
   std::uint64_t poses_not_initialized = 0;
   double longest_loss_s = 0.0;      ///< longest run of predicted or lost poses, frame time
   bool tracking_lost_at_end = false;  ///< the last published pose was not measured
+  // Gaps in the camera's frames (more than 0.5 s of capture time between two poses: a camera
+  // that stopped and came back) and the time from the first frame back to a measured pose.
+  std::uint64_t capture_gaps = 0;
+  double longest_capture_gap_s = 0.0;
+  double longest_resume_s = 0.0;
+  bool resumed_after_last_gap = true;  ///< false: no pose was measured after the last gap
   // Why frames were dropped (each also counted in `drops`).
   std::uint64_t frames_behind_schedule = 0;  ///< passed over by a real-time source running late
+  std::uint64_t frames_over_rate = 0;  ///< received faster than a camera sends (lcm: sources)
   std::uint64_t frames_dropped_before_tracking = 0;  ///< tracking's input queue was full
   std::uint64_t drops = 0;
   std::uint64_t errors = 0;

@@ -54,6 +54,9 @@ struct FrameSourceStats {
   /// Of frames_dropped: frames a real-time player passed over unread because it was behind its
   /// schedule (the capture thread, or what shares its CPU, was too slow).
   std::uint64_t frames_behind_schedule = 0;
+  /// Of frames_dropped: frames a live source received faster than a camera sends them
+  /// (capture.lcm.max_rate_hz), dropped before decoding.
+  std::uint64_t frames_over_rate = 0;
   std::uint64_t reconnects = 0;      ///< device re-opens after a disconnect
   std::uint64_t clock_reanchors = 0;  ///< live stream's clock really jumped and was re-anchored
   std::string last_error;            ///< most recent skip or failure message

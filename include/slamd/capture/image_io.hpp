@@ -11,10 +11,9 @@
 #include <string>
 #include <vector>
 
-namespace slamd {
+#include "slamd/common/file_io.hpp"  // readFileBytes
 
-/// Reads a whole file. Returns false and sets `error` when it cannot be read or is empty.
-bool readFileBytes(const std::string& path, std::vector<std::uint8_t>& bytes, std::string& error);
+namespace slamd {
 
 /// True when the bytes start with the JPEG start-of-image marker.
 bool looksLikeJpeg(const std::uint8_t* data, std::size_t size);

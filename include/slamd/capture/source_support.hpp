@@ -26,6 +26,8 @@ class SourceCounters {
   void dropped(std::uint64_t count = 1);
   /// A frame passed over unread by a player behind its schedule (also counted as dropped).
   void droppedBehindSchedule();
+  /// A frame received faster than the camera's rate (also counted as dropped).
+  void droppedOverRate();
   void reconnected();
   void reanchored();
   /// Records a failure message (e.g. a disconnect) without counting a frame.

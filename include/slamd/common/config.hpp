@@ -1,5 +1,5 @@
 #pragma once
-// Configuration: YAML files in config/ read with cv::FileStorage into a flat table of dotted keys
+// Configuration: YAML files in config/ (read by readYamlSubset) into a flat table of dotted keys
 // ("tracking.max_features"), overridden by `--set section.key=value`, then read by each module
 // into its own struct with defaults and validation.
 //
@@ -33,7 +33,7 @@ class Config {
  public:
   Config() = default;
 
-  /// Reads a YAML file (with or without the "%YAML:1.0" directive cv::FileStorage wants): a
+  /// Reads a YAML file (with or without a "%YAML:1.0" directive; see yaml_subset.hpp): a
   /// regular file of at most 1 MB, nested at most 64 levels (ConfigError otherwise).
   static Config fromFile(const std::string& path);
   /// Reads YAML text (for tests and embedded defaults).

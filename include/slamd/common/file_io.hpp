@@ -9,9 +9,11 @@
 //
 // Every write, flush, fsync, close and rename is checked; errors carry strerror's text.
 
+#include <cstdint>
 #include <functional>
 #include <ostream>
 #include <string>
+#include <vector>
 
 namespace slamd {
 
@@ -31,5 +33,18 @@ std::string temporaryPathFor(const std::string& path);
 /// A directory is an error.
 bool writeOutputFile(const std::string& path, const std::function<bool(std::ostream&)>& writer,
                      std::string* error = nullptr);
+
+/// Removes the temporary files an interrupted writeFileAtomically() left behind (a crash, power
+/// cut or kill -9 between creating "<path>.tmp" and renaming it): "<path>.tmp" of every path in
+/// `output_paths` (empty paths are skipped), and in `folder` (when not empty) every regular file
+/// named "*<suffix>.tmp" for one of `suffixes` (e.g. ".bt", ".ot"). Only regular files are
+/// removed. Returns the removed paths, for the caller to log.
+std::vector<std::string> removeStaleTemporaryFiles(const std::vector<std::string>& output_paths,
+                                                   const std::string& folder = "",
+                                                   const std::vector<std::string>& suffixes = {});
+
+/// Reads a whole regular file (a FIFO, directory or device is refused: reading one could block
+/// forever or never end). Returns false and sets `error` when it cannot be read or is empty.
+bool readFileBytes(const std::string& path, std::vector<std::uint8_t>& bytes, std::string& error);
 
 }  // namespace slamd

@@ -15,6 +15,11 @@ LogLevel logLevel();
 /// Parses "debug|info|warn|error"; throws std::invalid_argument otherwise.
 LogLevel parseLogLevel(const std::string& text);
 
+/// Text from outside (a command's argument, a file name in a message) made safe to log: bytes
+/// outside printable ASCII become \xHH, and more than `max_chars` characters are cut with "...".
+/// A hostile peer cannot forge log lines (newlines) or fill the log.
+std::string printableExcerpt(const std::string& text, std::size_t max_chars = 80);
+
 class LogLine {
  public:
   LogLine(LogLevel level, const char* component);

@@ -23,6 +23,7 @@
 #include <atomic>
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <string>
 #include <thread>
 #include <vector>
@@ -54,6 +55,11 @@ struct LcmFrameSourceConfig {
   /// capture.lcm.reanchor_frames, 1..1000: rejected frames in a row, agreeing with each other,
   /// after which the stream's clock is taken to have jumped for real and is re-anchored
   int reanchor_frames = 5;
+  /// capture.lcm.max_rate_hz, [0, 1000], 0 = no limit: a frame stamped less than 0.8 / max_rate_hz
+  /// after the previous frame delivered is dropped before its images are decoded, and counted
+  /// (FrameSourceStats::frames_over_rate). 60 admits 30 and 60 Hz cameras with their jitter and
+  /// keeps a flood of valid frames from costing a decode each.
+  double max_rate_hz = 60.0;
   CameraConfig camera;                            ///< camera.*, for kinect.frame_msg_t
 
   static LcmFrameSourceConfig load(Config& config);
@@ -90,6 +96,13 @@ class LcmFrameSource : public FrameSource {
   void onMessage(const lcm::ReceiveBuffer* buffer, const std::string& channel);
   void receiveLoop();
   FrameRead decode(const RawMessage& message);
+  /// The stream clock and rate checks, on the message's timestamp before any image is decoded:
+  /// a read to return instead of the frame (skipped or dropped), or nullopt to go on.
+  std::optional<FrameRead> checkTiming(Utime utime, std::int64_t arrival_steady_ns,
+                                       const std::string& what);
+  /// Frames closer than this fraction of 1 / max_rate_hz are over the rate (camera jitter
+  /// stays well above it).
+  static constexpr double kMinIntervalFraction = 0.8;
 
   std::string channel_;
   LcmFrameSourceConfig config_;
@@ -105,6 +118,7 @@ class LcmFrameSource : public FrameSource {
   std::int64_t sequence_ = 0;
   SourceCounters counters_;
   FrameGate gate_;
+  std::optional<Utime> last_delivered_utime_;
   StreamClock clock_{1.0, 5};
 };
 

@@ -22,6 +22,7 @@
 #include <octomap/OcTree.h>
 
 #include "slamd/mapping/map_types.hpp"
+#include "slamd/mapping/octree_stream.hpp"  // validateOctreeBinary
 #include "slamd/voxel_map_t.hpp"
 #include "slamd/voxel_map_update_t.hpp"
 
@@ -38,12 +39,6 @@ slamd::voxel_map_t toFullMapMessage(const FullMap& map);
 /// binary stream (see validateOctreeBinary).
 std::optional<FullMap> fromFullMapMessage(const slamd::voxel_map_t& message,
                                           std::string* error = nullptr);
-
-/// Checks an OcTree::writeBinaryData stream without building anything: two bytes per inner
-/// node, no node below the tree's 16 levels, every byte consumed. OctoMap's reader trusts its
-/// input (a corrupt stream can make it recurse without bound), so received bytes go here first.
-bool validateOctreeBinary(const std::uint8_t* data, std::size_t size,
-                          std::string* error = nullptr);
 
 /// Builds an OcTree from a full map (validated first); nullptr with *error on failure.
 std::unique_ptr<octomap::OcTree> fullMapToOcTree(const FullMap& map, std::string* error = nullptr);

@@ -87,6 +87,7 @@ struct MapperStats {
   std::int64_t full_maps_published = 0;
   std::int64_t snapshots_written = 0;
   std::int64_t snapshot_failures = 0;
+  std::int64_t snapshot_retries = 0;  ///< snapshots written early because the previous one failed
   std::int64_t keyframe_clouds = 0;          ///< currently kept
   std::int64_t keyframe_clouds_refused = 0;  ///< not kept because of the memory budget
   std::int64_t keyframe_cloud_bytes = 0;
@@ -139,7 +140,8 @@ class Mapper {
   // --- outputs --------------------------------------------------------------------------------
   /// Returns the outputs due at `now` (message time, microseconds): an update every
   /// 1/update_rate_hz, a full map every full_map_period_s or after requestFullMap(), a snapshot
-  /// every snapshot_period_s. An update is always emitted before a full map so that the map's
+  /// every snapshot_period_s (after a failed one, retried after 1, 2, 4, ... s up to the period).
+  /// An update is always emitted before a full map so that the map's
   /// update_sequence covers it. Empty updates are not emitted.
   MapperOutputs poll(Utime now);
   /// The changes since the previous update (possibly none); advances the sequence.
@@ -246,6 +248,9 @@ class Mapper {
   std::optional<Utime> last_update_time_;
   std::optional<Utime> last_full_map_time_;
   std::optional<Utime> last_snapshot_time_;
+  static constexpr double kFirstSnapshotRetryDelayS = 1.0;
+  std::optional<Utime> snapshot_retry_at_;  ///< set while the last snapshot failed
+  double snapshot_retry_delay_s_ = kFirstSnapshotRetryDelayS;
 };
 
 }  // namespace slamd

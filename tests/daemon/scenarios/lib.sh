@@ -75,3 +75,41 @@ log_count() {
 
 # a <= b for decimals
 less_equal() { awk -v a="$1" -v b="$2" 'BEGIN { exit !(a <= b) }'; }
+
+# flood_run DIR FACTOR FRAMES SECONDS [SLAMD ARGS...]: slamd on lcm:SLAMD_FRAMES while
+# slamd-test-flood publishes the TUM folder FRAMES for SECONDS at FACTOR messages per frame
+# period (1 = the camera alone). Leaves DIR/metrics.json, DIR/rss_kb.txt (slamd's resident memory
+# every 0.25 s), DIR/flood.txt and DIR/slamd.log; fails when slamd does not exit cleanly.
+# CONFIG names the configuration file.
+flood_run() {
+  local dir=$1 factor=$2 frames=$3 seconds=$4
+  shift 4
+  mkdir -p "$dir"
+  "$SLAMD_BIN/slamd" --config "$CONFIG" --log-level warn "$@" --source lcm:SLAMD_FRAMES \
+    --metrics-out "$dir/metrics.json" 2> "$dir/slamd.log" &
+  local pid=$!
+  wait_for 20 "slamd to publish status" "$SLAMD_BIN/slamd-status" --once --timeout 1 --log-level error
+  # Memory is sampled from the moment the publisher starts (after it has encoded its frames).
+  rm -f "$dir/publishing"
+  (while kill -0 $pid 2> /dev/null; do
+     [ -e "$dir/publishing" ] && { awk '/VmRSS/ { print $2 }' /proc/$pid/status 2> /dev/null || true; }
+     sleep 0.25
+   done) > "$dir/rss_kb.txt" &
+  local sampler=$!
+  "$SLAMD_BIN/slamd-test-flood" --config "$CONFIG" --log-level warn "$@" --source "tum:$frames" \
+    --seconds "$seconds" --factor "$factor" --started-file "$dir/publishing" > "$dir/flood.txt"
+  kill -INT $pid
+  local status=0
+  wait $pid || status=$?
+  kill $sampler 2> /dev/null || true
+  wait $sampler 2> /dev/null || true
+  [ $status -eq 0 ] || { tail -20 "$dir/slamd.log"; fail "slamd exited with $status (factor $factor)"; }
+}
+
+# rss_quarters FILE: mean resident memory (kB) over the second quarter and over the last quarter
+# of the samples in FILE, as "EARLY LATE".
+rss_quarters() {
+  awk '{ v[NR] = $1 } END { n = NR; for (i = 1; i <= n; i++) {
+    if (i > n / 4 && i <= n / 2) { e += v[i]; ne++ } if (i > 3 * n / 4) { l += v[i]; nl++ } }
+    printf "%d %d\n", e / ne, l / nl }' "$1"
+}
