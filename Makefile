@@ -1,7 +1,7 @@
 # slamd: the two commands that do everything on a fresh Debian 12 machine are
 #   make run    (installs dependencies, builds, runs slamd on a built-in synthetic world)
-#   make test   (installs dependencies, builds, runs every test, plus the concurrency tests
-#                under ThreadSanitizer)
+#   make test   (installs dependencies, builds, runs every test, then the concurrency tests
+#                under ThreadSanitizer and every test under AddressSanitizer + UBSan)
 # Other targets: deps, build, bench, tsan, asan, ubsan, asan-ubsan, fuzz, clean.
 
 BUILD_DIR ?= build
@@ -25,7 +25,7 @@ build: deps $(BUILD_DIR)/CMakeCache.txt
 unit-test: build
 	cd $(BUILD_DIR) && ctest --output-on-failure -j$(JOBS) $(CTEST_ARGS)
 
-test: unit-test tsan
+test: unit-test tsan asan-ubsan
 
 run: build
 	@bash scripts/run-default.sh $(BUILD_DIR)
@@ -58,11 +58,14 @@ asan-ubsan: deps
 	cd build-asan-ubsan && ASAN_OPTIONS="detect_leaks=1" UBSAN_OPTIONS="print_stacktrace=1" \
 	  ctest --output-on-failure -j$(JOBS) $(CTEST_ARGS)
 
-# libFuzzer over everything slamd reads from outside (tests/fuzz): FUZZ_SECONDS per target.
+# libFuzzer over everything slamd reads from outside (tests/fuzz): FUZZ_SECONDS per target (or
+# FUZZ_RUNS executions, when given and reached first).
 FUZZ_SECONDS ?= 60
+FUZZ_RUNS ?= -1
 fuzz:
 	@bash scripts/install-deps.sh fuzz
-	FUZZ_SECONDS=$(FUZZ_SECONDS) BUILD_JOBS=$(JOBS) bash scripts/run-fuzz.sh build-fuzz
+	FUZZ_SECONDS=$(FUZZ_SECONDS) FUZZ_RUNS=$(FUZZ_RUNS) BUILD_JOBS=$(JOBS) \
+	  bash scripts/run-fuzz.sh build-fuzz
 
 clean:
 	rm -rf $(BUILD_DIR) build-tsan build-asan build-ubsan build-asan-ubsan build-fuzz

@@ -15,9 +15,12 @@ if(SLAMD_SANITIZE)
   elseif(SLAMD_SANITIZE STREQUAL "undefined")
     set(_slamd_san_flags -fsanitize=undefined -fno-sanitize-recover=undefined)
   elseif(SLAMD_SANITIZE STREQUAL "address+undefined")
-    # One build for both: cheaper than two (the issue's CI budget), and they do not conflict.
-    set(_slamd_san_flags -fsanitize=address,undefined -fno-sanitize-recover=undefined
-                         -fno-omit-frame-pointer)
+    # One build for both: cheaper than two (CI's time budget), and they do not conflict. The vptr
+    # check is off: LCM's own header (lcm-cpp-impl.hpp) hands its subscription objects through
+    # void* in a way GCC's check reports on every message received, and GCC cannot exempt one
+    # header; slamd downcasts only with dynamic_cast, which checks itself.
+    set(_slamd_san_flags -fsanitize=address,undefined -fno-sanitize=vptr
+                         -fno-sanitize-recover=undefined -fno-omit-frame-pointer)
   elseif(SLAMD_SANITIZE STREQUAL "fuzzer")
     # The `make fuzz` tree: libFuzzer's coverage instrumentation everywhere (the fuzz programs
     # add -fsanitize=fuzzer for libFuzzer's main), with ASan and UBSan to turn bad reads, leaks

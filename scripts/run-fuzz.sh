@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
-# `make fuzz [FUZZ_SECONDS=N] [FUZZ_TARGETS="a b"]`: builds the fuzz targets (tests/fuzz) with
+# `make fuzz [FUZZ_SECONDS=N] [FUZZ_RUNS=N] [FUZZ_TARGETS="a b"]`: builds the fuzz targets (tests/fuzz) with
 # clang, libFuzzer, AddressSanitizer and UndefinedBehaviorSanitizer in build-fuzz/, writes the
 # seed corpora from real data (fuzz_seeds), and runs every target for FUZZ_SECONDS (default 60)
-# seconds, one per core at a time. Limits per target: no single allocation over 1 GB
+# seconds, or until FUZZ_RUNS executions if that comes first, one per core at a time. Limits per target: no single allocation over 1 GB
 # (-malloc_limit_mb), 2 GB resident, 10 s per input. Prints per target the executions, their rate,
 # the corpus size and the findings, and exits 1 when any target crashed, hung, leaked or
 # over-allocated. Findings are kept in build-fuzz/fuzz/findings/<target>/: add each to
@@ -12,6 +12,7 @@ set -euo pipefail
 ROOT=$(cd "$(dirname "$0")/.." && pwd)
 BUILD_DIR=${1:-$ROOT/build-fuzz}
 SECONDS_PER_TARGET=${FUZZ_SECONDS:-60}
+RUNS_PER_TARGET=${FUZZ_RUNS:--1}  # -1: no limit on executions (FUZZ_SECONDS ends the run)
 JOBS=${FUZZ_JOBS:-$(nproc)}
 TARGETS=${FUZZ_TARGETS:-"lcm_messages frame_codec map_codec command config vocabulary tum_lists"}
 
@@ -32,12 +33,12 @@ run_target() {
   ASAN_OPTIONS="detect_leaks=1:allocator_may_return_null=0" \
   UBSAN_OPTIONS="print_stacktrace=1" \
     "$BUILD_DIR/bin/${target}_fuzzer" "$WORK/corpus/$target" "$WORK/seeds/$target" \
-      -max_total_time="$SECONDS_PER_TARGET" -malloc_limit_mb=1024 -rss_limit_mb=2048 \
+      -max_total_time="$SECONDS_PER_TARGET" -runs="$RUNS_PER_TARGET" -malloc_limit_mb=1024 -rss_limit_mb=2048 \
       -timeout=10 -print_final_stats=1 -artifact_prefix="$WORK/findings/$target/" \
       >"$WORK/logs/$target.log" 2>&1 || true
 }
 export -f run_target
-export WORK BUILD_DIR SECONDS_PER_TARGET
+export WORK BUILD_DIR SECONDS_PER_TARGET RUNS_PER_TARGET
 echo "fuzzing ${TARGETS// /, } for ${SECONDS_PER_TARGET} s each, $JOBS at a time"
 printf '%s\n' $TARGETS | xargs -P "$JOBS" -I{} bash -c 'run_target {}'
 

@@ -12,6 +12,9 @@
 #include <ostream>
 #include <random>
 #include <set>
+#include <sstream>
+
+#include "slamd/common/file_io.hpp"
 
 namespace slamd {
 
@@ -344,10 +347,18 @@ bool Vocabulary::read(std::istream& in, std::string* error) {
   if (payload_size < min_size || payload_size > max_size) {
     return fail(error, "inconsistent payload size " + std::to_string(payload_size));
   }
-  std::string payload(static_cast<std::size_t>(payload_size), '\0');
+  // Read in pieces, so that memory grows only with bytes really present: a 60-byte file whose
+  // header declares 50 million nodes must not allocate 2 GB first.
+  std::string payload;
+  constexpr std::size_t kPiece = 1 << 20;
   std::uint64_t checksum = 0;
-  if (!in.read(payload.data(), static_cast<std::streamsize>(payload.size())) ||
-      !in.read(reinterpret_cast<char*>(&checksum), sizeof(checksum))) {
+  while (payload.size() < payload_size) {
+    const std::size_t offset = payload.size();
+    const auto piece = static_cast<std::size_t>(std::min<std::uint64_t>(kPiece, payload_size - offset));
+    payload.resize(offset + piece);
+    if (!in.read(payload.data() + offset, static_cast<std::streamsize>(piece))) break;
+  }
+  if (!in || !in.read(reinterpret_cast<char*>(&checksum), sizeof(checksum))) {
     return fail(error, "truncated (expected " + std::to_string(payload_size + 8) +
                            " bytes after the header)");
   }
@@ -408,25 +419,25 @@ bool Vocabulary::read(std::istream& in, std::string* error) {
 }
 
 void Vocabulary::save(const std::string& path) const {
-  const std::string temporary = path + ".tmp";
-  {
-    std::ofstream out(temporary, std::ios::binary | std::ios::trunc);
-    if (!out) throw VocabularyError("vocabulary '" + path + "': cannot open " + temporary);
-    write(out);
-    out.flush();
-    if (!out) throw VocabularyError("vocabulary '" + path + "': write failed");
-  }
-  if (std::rename(temporary.c_str(), path.c_str()) != 0) {
-    std::remove(temporary.c_str());
-    throw VocabularyError("vocabulary '" + path + "': cannot rename " + temporary);
+  std::string error;
+  if (!writeFileAtomically(
+          path,
+          [this](std::ostream& out) {
+            write(out);
+            return true;
+          },
+          &error)) {
+    throw VocabularyError("vocabulary '" + path + "': " + error);
   }
 }
 
 Vocabulary Vocabulary::load(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw VocabularyError("vocabulary '" + path + "': cannot open");
-  Vocabulary vocabulary;
+  // Read whole (a regular file only: a FIFO would block), then parsed from memory.
+  std::vector<std::uint8_t> bytes;
   std::string error;
+  if (!readFileBytes(path, bytes, error)) throw VocabularyError("vocabulary: " + error);
+  std::istringstream in(std::string(bytes.begin(), bytes.end()), std::ios::binary);
+  Vocabulary vocabulary;
   if (!vocabulary.read(in, &error)) throw VocabularyError("vocabulary '" + path + "': " + error);
   return vocabulary;
 }

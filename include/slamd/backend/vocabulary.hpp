@@ -71,9 +71,9 @@ class Vocabulary {
   /// vocabulary unchanged. Never crashes on arbitrary bytes.
   bool read(std::istream& in, std::string* error = nullptr);
 
-  /// write() to a file (written to FILE.tmp, then renamed); throws VocabularyError.
+  /// write() to a file, crash-safely (writeFileAtomically); throws VocabularyError.
   void save(const std::string& path) const;
-  /// read() from a file; throws VocabularyError naming the file and the problem.
+  /// read() from a regular file; throws VocabularyError naming the file and the problem.
   static Vocabulary load(const std::string& path);
 
   static constexpr std::uint32_t kFileVersion = 2;
