@@ -4,13 +4,21 @@
 # previous snapshot stays intact, the map stays in memory, and the snapshot is retried (1, 2,
 # 4 s ...). Once space is freed the next retry writes it, and the final map is saved at exit.
 if [ -z "${SLAMD_IN_MOUNT_NS:-}" ]; then
-  SLAMD_IN_MOUNT_NS=1 exec unshare -m bash "$0" "$@"
+  export SLAMD_IN_MOUNT_NS=1
+  # In a chroot (a fresh-machine test) the root is not a mount point, so unshare cannot make all
+  # mounts private; the namespace then keeps their propagation, and the tmpfs is unmounted on
+  # exit below so that nothing is left behind either way.
+  if unshare -m true 2> /dev/null; then
+    exec unshare -m bash "$0" "$@"
+  fi
+  exec unshare -m --propagation unchanged bash "$0" "$@"
 fi
 source "$(dirname "$0")/lib.sh"
 private_network
 cd "$WORK"
 mkdir -p disk
 mount -t tmpfs -o size=4m slamd-full-disk disk || fail "cannot mount a tmpfs"
+trap 'umount -l "$WORK/disk" 2> /dev/null || true' EXIT
 "$SLAMD_BIN/slamd" --config "$SLAMD_SOURCE_DIR/config/synthetic.yaml" --log-level info \
   "${SMALL_CAMERA[@]}" --source synthetic:room --set synthetic.frames=450 \
   --set capture.pacing.mode=realtime --set mapping.snapshot_path="$WORK/disk/snapshot.bt" \
