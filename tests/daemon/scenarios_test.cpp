@@ -81,6 +81,11 @@ TEST_F(DaemonScenario, AnIdleLcmSourceCountsOnlyRealFrames) {
 }
 
 TEST_F(DaemonScenario, AFloodOfTenTimesTheMessageRateIsCountedAndMemoryStaysFlat) {
+#if defined(__SANITIZE_ADDRESS__)
+  // A load test: its thresholds assume slamd at full speed; ASan makes it 2-3x slower. The
+  // flood's bytes are covered under ASan by the fuzz replays and the malformed-message scenario.
+  GTEST_SKIP() << "load scenario: not run in sanitizer builds";
+#endif
   std::string log;
   EXPECT_EQ(run("lcm_flood", &log), 0) << log;
 }
