@@ -90,9 +90,11 @@ struct TrackingTally {
     last_state = state;
     latest_utime.store(utime, std::memory_order_relaxed);
     const bool measured = state == TrackingState::kOk || state == TrackingState::kRelocalized;
-    if (previous_utime >= 0 && utimeToSeconds(utime - previous_utime) > kCaptureGapS) {
+    const double since_previous_s =
+        previous_utime >= 0 ? utimeToSeconds(utime - previous_utime) : 0.0;
+    if (since_previous_s > kCaptureGapS) {
       ++capture_gaps;
-      longest_capture_gap_s = std::max(longest_capture_gap_s, utimeToSeconds(utime - previous_utime));
+      longest_capture_gap_s = std::max(longest_capture_gap_s, since_previous_s);
       gap_return_utime = utime;
     }
     previous_utime = utime;

@@ -147,7 +147,7 @@ class Reader {
         values_[full_key] = rest.front() == '[' ? flowSequence(rest, line.number)
                                                 : scalar(rest, line.number);
       } else if (next_ < lines_.size() && lines_[next_].indent >= indent &&
-                 isListItem(lines_[next_]) && lines_[next_].indent >= indent) {
+                 isListItem(lines_[next_])) {
         values_[full_key] = blockSequence(lines_[next_].indent);
       } else if (next_ < lines_.size() && lines_[next_].indent > indent) {
         readMap(lines_[next_].indent, full_key, depth + 1);
