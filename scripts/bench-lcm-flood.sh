@@ -5,7 +5,8 @@
 # tests/daemon/lcm_flood.cpp), RUNS times each for SECONDS. Reports per case the median over runs
 # of capture-to-pose latency p50/p99 (from the moment a frame reached slamd), poses published,
 # frames dropped, and slamd's resident memory early (25-50% of the run) and late (last 25%).
-#   scripts/bench-lcm-flood.sh [BUILD_DIR]    environment: RUNS (3), SECONDS_PER_RUN (20), OUT
+#   scripts/bench-lcm-flood.sh [BUILD_DIR]    environment: RUNS (3), SECONDS_PER_RUN (20), OUT,
+#   SLAMD_ARGS (more slamd arguments, e.g. "--set daemon.mapping_nice=19")
 set -euo pipefail
 ROOT=$(cd "$(dirname "$0")/.." && pwd)
 BIN=$(cd "${1:-$ROOT/build}" && pwd)/bin
@@ -34,7 +35,7 @@ fi
 one_run() {  # one_run FACTOR RUN: prints "p50 p99 published drops rss_early_mb rss_late_mb"
   local dir="factor$1-run$2"
   rm -rf "$dir"
-  flood_run "$dir" "$1" "frames-$frames" "$SECONDS_PER_RUN" --set daemon.save_dir="$dir/maps"
+  flood_run "$dir" "$1" "frames-$frames" "$SECONDS_PER_RUN" --set daemon.save_dir="$dir/maps" ${SLAMD_ARGS:-}
   local m="$dir/metrics.json"
   echo "$(json_number "$m" end_to_end_p50_ms) $(json_number "$m" end_to_end_p99_ms)" \
        "$(json_number "$m" poses_published) $(json_number "$m" drops)" \

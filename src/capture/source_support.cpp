@@ -73,12 +73,16 @@ StreamClock::Verdict StreamClock::check(Utime utime, std::int64_t arrival_steady
   if (!anchored_) {
     anchored_ = true;
     offset_us_ = offset_us;
+    last_utime_ = utime;
     last_jump_us_ = 0;
     return Verdict::kAccept;
   }
   last_jump_us_ = offset_us - offset_us_;
-  if (std::llabs(last_jump_us_) <= max_jump_us_) {
-    offset_us_ = offset_us;  // follows slow drift between the two clocks
+  // Within the tolerance, or late but still after the last accepted frame (a pause in delivery).
+  const bool arrived_late_in_order = last_jump_us_ < 0 && utime > last_utime_;
+  if (std::llabs(last_jump_us_) <= max_jump_us_ || arrived_late_in_order) {
+    offset_us_ = offset_us;  // follows slow drift between the two clocks, and pauses
+    last_utime_ = utime;
     run_length_ = 0;
     return Verdict::kAccept;
   }
@@ -90,6 +94,7 @@ StreamClock::Verdict StreamClock::check(Utime utime, std::int64_t arrival_steady
   run_offset_us_ = offset_us;
   if (run_length_ < reanchor_frames_) return Verdict::kReject;
   offset_us_ = offset_us;
+  last_utime_ = utime;
   run_length_ = 0;
   return Verdict::kReanchor;
 }

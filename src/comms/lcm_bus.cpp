@@ -1,5 +1,7 @@
 #include "slamd/comms/lcm_bus.hpp"
 
+#include <pthread.h>
+
 #include "slamd/common/log.hpp"
 
 namespace slamd {
@@ -46,6 +48,7 @@ void LcmBus::onRaw(const lcm::ReceiveBuffer* buffer, const std::string& channel,
 void LcmBus::startHandling() {
   if (handling_.exchange(true)) return;
   handler_thread_ = std::thread([this] {
+    pthread_setname_np(pthread_self(), "slamd:lcm-bus");
     // Short timeouts so stopHandling() is noticed within 50 ms.
     while (handling_.load(std::memory_order_acquire)) {
       if (lcm_.handleTimeout(50) < 0) {

@@ -17,7 +17,7 @@ LcmFramePublisherConfig LcmFramePublisherConfig::load(Config& config) {
       config.getChoice("capture.publish.color", "jpeg", {"jpeg", "png", "rgb8", "bgr8"}));
   out.encode.jpeg_quality = config.getInt("capture.publish.jpeg_quality", 90, 1, 100);
   out.encode.depth =
-      parseDepthEncoding(config.getChoice("capture.publish.depth", "png", {"png", "zlib", "raw"}));
+      parseDepthEncoding(config.getChoice("capture.publish.depth", "zlib", {"zlib", "png", "raw"}));
   out.encode.depth_scale = config.getDouble("capture.publish.depth_scale", 1000.0, 1.0, 1e5);
   return out;
 }

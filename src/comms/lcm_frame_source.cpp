@@ -1,5 +1,7 @@
 #include "slamd/comms/lcm_frame_source.hpp"
 
+#include <pthread.h>
+
 #include <cstdio>
 #include <lcm/lcm-cpp.hpp>
 #include <opencv2/imgproc.hpp>
@@ -106,6 +108,7 @@ void LcmFrameSource::open() {
 }
 
 void LcmFrameSource::receiveLoop() {
+  pthread_setname_np(pthread_self(), "slamd:lcm-recv");
   // handleTimeout bounds each wait so that close() is noticed within 50 ms.
   while (!stop_.load(std::memory_order_acquire)) {
     if (lcm_->handleTimeout(50) < 0) {

@@ -1,5 +1,6 @@
 #include "slamd/pipeline/pipeline.hpp"
 
+#include <pthread.h>
 #include <sys/resource.h>
 #include <sys/syscall.h>
 #include <unistd.h>
@@ -51,6 +52,10 @@ void Pipeline::start() {
   for (auto& node : nodes_) {
     pipeline_detail::NodeBase* raw = node.get();
     threads_.emplace_back([raw] {
+      // Named after the stage ("slamd:tracking", cut to Linux's 15 characters) so that top -H,
+      // perf and gdb show which stage a thread is.
+      const std::string thread_name = ("slamd:" + raw->name()).substr(0, 15);
+      pthread_setname_np(pthread_self(), thread_name.c_str());
       if (raw->nice() != 0) {
         // Linux applies setpriority(PRIO_PROCESS, tid) to one thread.
         const auto tid = static_cast<id_t>(syscall(SYS_gettid));

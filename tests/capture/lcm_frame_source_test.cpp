@@ -2,7 +2,9 @@
 
 #include <gtest/gtest.h>
 
+#include <chrono>
 #include <cmath>
+#include <thread>
 #include <lcm/lcm-cpp.hpp>
 
 #include "slamd/comms/lcm_frame_publisher.hpp"
@@ -216,6 +218,29 @@ TEST(LcmFrameSource, AClockThatReallyJumpsIsReanchoredAfterAgreeingFrames) {
   ASSERT_EQ(received.frames.size(), 6u);
   EXPECT_EQ(received.frames[3]->sequence, 7);
   EXPECT_EQ(source.stats().clock_reanchors, 1u);
+}
+
+// A pause in delivery is not a clock jump: frames that arrive late but in order (a camera that
+// stalled, a log recorded while its producer was held up and replayed with the same gaps) are
+// accepted. Before, every frame after a pause longer than capture.lcm.max_time_jump_s was
+// rejected until the clock re-anchored, and a replayed log lost frames.
+TEST(LcmFrameSource, FramesArrivingLateButInOrderAreAPauseNotAJump) {
+  MemqFixture memq;
+  LcmFrameSourceConfig config = memq.source_config();
+  config.max_time_jump_s = 0.1;
+  LcmFrameSource source(memq.lcm, kChannel, config);
+  source.open();
+  FrameEncodeOptions options;
+  for (int i = 0; i < 6; ++i) {
+    if (i == 3) std::this_thread::sleep_for(std::chrono::milliseconds(400));  // 4x the tolerance
+    publishRaw(*memq.lcm, encodeMessage(encodeRgbdFrame(*makeFrame(i), options)));
+  }
+  const auto received = readCount(source, 6);
+  EXPECT_TRUE(received.skip_messages.empty())
+      << (received.skip_messages.empty() ? "" : received.skip_messages[0]);
+  ASSERT_EQ(received.frames.size(), 6u);
+  EXPECT_EQ(received.frames.back()->sequence, 5);
+  EXPECT_EQ(source.stats().clock_reanchors, 0u);
 }
 
 TEST(LcmFrameSource, FormatOptionRejectsTheOtherType) {

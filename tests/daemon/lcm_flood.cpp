@@ -1,6 +1,6 @@
 // slamd-test-flood: a camera on LCM at its normal rate, plus a flood around it, for the flood
 // scenario and benchmark. Reads a TUM folder (slamd-synth's output), encodes each frame once as
-// slamd.rgbd_frame_t (JPEG colour, PNG depth), then for --seconds publishes, in every frame
+// slamd.rgbd_frame_t (JPEG colour, zlib depth), then for --seconds publishes, in every frame
 // period (1 / --rate-hz), --factor messages evenly spaced (default 10: ten times the camera's
 // message rate):
 //   the camera's frame, stamped now;
@@ -37,7 +37,7 @@ std::vector<slamd::rgbd_frame_t> encodeAllFrames(const std::string& source_name,
   config.set("capture.pacing.mode", "fastest");
   std::unique_ptr<FrameSource> source = createFrameSource(source_name, config);
   source->open();
-  FrameEncodeOptions options;  // JPEG colour, PNG depth: what slamd-play --publish sends
+  FrameEncodeOptions options;  // JPEG colour, zlib depth: what slamd-play --publish sends
   std::vector<slamd::rgbd_frame_t> frames;
   while (true) {
     const FrameRead read = source->next(std::chrono::milliseconds(5000));

@@ -57,6 +57,9 @@ class FrameGate {
 /// far-future stamp) is rejected, so it cannot poison the stream. When `reanchor_frames` rejected
 /// frames in a row agree with each other (offsets within max_jump_s), the source's clock really
 /// jumped (a restarted camera, a log replayed again): the stream re-anchors to them.
+/// A frame that only arrives late (its timestamp still after the last accepted one, but later
+/// than the clock expects) is a pause in delivery, not a jump: a camera that stalled, a log
+/// recorded while its producer was held up, a slow link. It is accepted and the clock follows it.
 /// One owner thread.
 class StreamClock {
  public:
@@ -76,6 +79,7 @@ class StreamClock {
   int reanchor_frames_;
   bool anchored_ = false;
   std::int64_t offset_us_ = 0;  ///< utime - arrival of the last accepted frame
+  Utime last_utime_ = 0;        ///< timestamp of the last accepted frame
   std::int64_t last_jump_us_ = 0;
   int run_length_ = 0;          ///< consecutive rejected frames agreeing with each other
   std::int64_t run_offset_us_ = 0;

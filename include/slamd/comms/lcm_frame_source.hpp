@@ -57,9 +57,11 @@ struct LcmFrameSourceConfig {
   int reanchor_frames = 5;
   /// capture.lcm.max_rate_hz, [0, 1000], 0 = no limit: a frame stamped less than 0.8 / max_rate_hz
   /// after the previous frame delivered is dropped before its images are decoded, and counted
-  /// (FrameSourceStats::frames_over_rate). 60 admits 30 and 60 Hz cameras with their jitter and
-  /// keeps a flood of valid frames from costing a decode each.
-  double max_rate_hz = 60.0;
+  /// (FrameSourceStats::frames_over_rate). The camera's own frame rate (30 for Kinect- and
+  /// Xtion-class cameras; set 60 for a 60 Hz mode, 0 to replay logs faster than recorded): it
+  /// admits the camera with its jitter and keeps extra valid frames (a second publisher, a flood)
+  /// from costing a decode and a tracking step each.
+  double max_rate_hz = 30.0;
   CameraConfig camera;                            ///< camera.*, for kinect.frame_msg_t
 
   static LcmFrameSourceConfig load(Config& config);
