@@ -140,6 +140,12 @@ class ConfigSchema {
     return std::invoke(field, object);
   }
 
+  /// A key without range: bool or string, read by `read(config, key, default)` and shown as
+  /// configuration text by `show(value)`.
+  template <typename Field, typename Read, typename Show>
+  ConfigSchema&& plain(const char* name, Field field, const char* type, Read read, Show show,
+                       const char* doc) &&;
+
   ConfigSchema&& add(Row row) && {
     rows_.push_back(std::move(row));
     return std::move(*this);
@@ -197,19 +203,20 @@ ConfigSchema<T>&& ConfigSchema<T>::number(const char* name, Field field, double 
 }
 
 template <typename T>
-template <typename Field>
-ConfigSchema<T>&& ConfigSchema<T>::flag(const char* name, Field field, const char* doc) && {
+template <typename Field, typename Read, typename Show>
+ConfigSchema<T>&& ConfigSchema<T>::plain(const char* name, Field field, const char* type,
+                                         Read read, Show show, const char* doc) && {
   Row row;
   row.name = name;
   row.load = [=](Config& config, const std::string& key, T& object) {
-    bool& value = member(field, object);
-    value = config.getBool(key, value);
+    auto& value = member(field, object);
+    value = read(config, key, value);
   };
   row.check = [](const std::string&, const T&) { return std::string(); };
   row.describe = [=](const T& defaults) {
     ConfigKeyDescription d;
-    d.type = "bool";
-    d.default_value = member(field, defaults) ? "true" : "false";
+    d.type = type;
+    d.default_value = show(member(field, defaults));
     d.doc = doc;
     return d;
   };
@@ -218,22 +225,22 @@ ConfigSchema<T>&& ConfigSchema<T>::flag(const char* name, Field field, const cha
 
 template <typename T>
 template <typename Field>
+ConfigSchema<T>&& ConfigSchema<T>::flag(const char* name, Field field, const char* doc) && {
+  return std::move(*this).plain(
+      name, field, "bool",
+      [](Config& config, const std::string& key, bool value) { return config.getBool(key, value); },
+      [](bool value) { return std::string(value ? "true" : "false"); }, doc);
+}
+
+template <typename T>
+template <typename Field>
 ConfigSchema<T>&& ConfigSchema<T>::text(const char* name, Field field, const char* doc) && {
-  Row row;
-  row.name = name;
-  row.load = [=](Config& config, const std::string& key, T& object) {
-    std::string& value = member(field, object);
-    value = config.getString(key, value);
-  };
-  row.check = [](const std::string&, const T&) { return std::string(); };
-  row.describe = [=](const T& defaults) {
-    ConfigKeyDescription d;
-    d.type = "string";
-    d.default_value = member(field, defaults);
-    d.doc = doc;
-    return d;
-  };
-  return std::move(*this).add(std::move(row));
+  return std::move(*this).plain(
+      name, field, "string",
+      [](Config& config, const std::string& key, const std::string& value) {
+        return config.getString(key, value);
+      },
+      [](const std::string& value) { return value; }, doc);
 }
 
 template <typename T>
