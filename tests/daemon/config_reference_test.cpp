@@ -39,7 +39,9 @@ TEST(ConfigReference, EveryKeyHasATypeAndADoc) {
   for (const auto& key : describeConfiguration("")) {
     EXPECT_FALSE(key.doc.empty()) << key.key;
     EXPECT_FALSE(key.type.empty()) << key.key;
-    if (key.has_range) EXPECT_LE(key.min_value, key.max_value) << key.key;
+    if (key.has_range) {
+      EXPECT_LE(key.min_value, key.max_value) << key.key;
+    }
   }
 }
 
