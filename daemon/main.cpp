@@ -4,6 +4,7 @@
 
 #include <iostream>
 
+#include "slamd/app/config_reference.hpp"
 #include "slamd/app/slam_daemon.hpp"
 #include "slamd/capture/frame_source.hpp"
 #include "slamd/common/log.hpp"
@@ -32,7 +33,31 @@ int main(int argc, char** argv) {
                     "write the source's ground truth (TUM folders, synthetic worlds) at exit");
   options.addOption("metrics-out", "FILE.json",
                     "write run metrics (rates, drops, latency percentiles) as JSON at exit");
+  options.addFlag("describe-config",
+                  "print every configuration key (or those of AREA: daemon, mapping, ...) with its "
+                  "type, default, range, unit and doc, and exit");
+  options.addFlag("json", "with --describe-config: as a JSON array");
+  options.addFlag("markdown", "with --describe-config: as Markdown tables (the README's reference)");
+  options.setPositional("[AREA]", 0, 1);
   if (!options.parse(argc, argv)) return options.exitCode();
+  if (options.flag("describe-config")) {
+    try {
+      const auto keys =
+          describeConfiguration(options.positional().empty() ? "" : options.positional()[0]);
+      std::cout << (options.flag("json")       ? configReferenceJson(keys)
+                    : options.flag("markdown") ? configReferenceMarkdown(keys)
+                                               : configReferenceText(keys));
+      return kExitOk;
+    } catch (const ConfigError& e) {
+      std::cerr << "slamd: " << e.what() << "\n";
+      return kExitUsage;
+    }
+  }
+  if (!options.positional().empty() || options.flag("json") || options.flag("markdown")) {
+    std::cerr << "slamd: AREA, --json and --markdown go with --describe-config\n"
+              << options.usage();
+    return kExitUsage;
+  }
 
   DaemonOverrides overrides;
   overrides.source = options.value("source");

@@ -2,36 +2,73 @@
 
 namespace slamd {
 
+const ConfigSchema<DaemonConfig>& DaemonConfig::schema() {
+  using C = DaemonConfig;
+  static const auto table =
+      ConfigSchema<C>("daemon")
+          .text("source", &C::source,
+                "tum:DIR | openni2[:URI] | oni:FILE | lcm:CHANNEL | synthetic:SCENE (--source); "
+                "not empty")
+          .text("trajectory_out", &C::trajectory_out,
+                "TUM trajectory written at exit (--trajectory-out); empty = none")
+          .text("map_out", &C::map_out, "map (.bt or .ot) written at exit (--map-out)")
+          .text("groundtruth_out", &C::groundtruth_out,
+                "the source's ground truth (TUM folders, synthetic worlds) written at exit in TUM "
+                "format (--groundtruth-out)")
+          .text("metrics_out", &C::metrics_out,
+                "run metrics as JSON at exit: frames, rate, drops, per-stage and capture-to-pose "
+                "latency percentiles (--metrics-out)")
+          .number("status_period_s", &C::status_period_s, 0.05, 60.0, "s",
+                  "SLAMD_STATUS publication period")
+          .number("drain_deadline_s", &C::drain_deadline_s, 0.0, 600.0, "s",
+                  "at shutdown, how long the stages may take to finish queued frames before the "
+                  "rest is discarded (and counted)")
+          .number("heartbeat_period_s", &C::heartbeat_period_s, 0.01, 10.0, "s",
+                  "with no frame for this long the capture thread sends a heartbeat so later "
+                  "stages can serve commands")
+          .number("tracking_queue", &C::tracking_queue, 1, 1000, "frames",
+                  "frames waiting for tracking; live and real-time sources drop the oldest (1: "
+                  "tracking always gets the newest frame), datasets played as fast as possible wait")
+          .number("filter_queue", &C::filter_queue, 1, 1000, "frames",
+                  "tracked frames waiting for the filter (never dropped)")
+          .number("publish_queue", &C::publish_queue, 1, 1000, "poses",
+                  "poses waiting for publication (never dropped)")
+          .number("mapping_queue", &C::mapping_queue, 1, 1000, "frames",
+                  "frames waiting for mapping; live runs skip to the newest, datasets played as "
+                  "fast as possible wait")
+          .number("backend_queue", &C::backend_queue, 1, 100000, "frames",
+                  "filtered frames waiting for the back end (never dropped: a lost keyframe would "
+                  "break the graph); absorbs long optimisations")
+          .flag("vanishing_point_thread", &C::vanishing_point_thread,
+                "detect vanishing points on a thread of their own, in parallel with tracking, "
+                "instead of on the filter thread (takes a few ms off the capture-to-pose path)")
+          .number("vanishing_point_wait_ms", &C::vanishing_point_wait_ms, 0.0, 1000.0, "ms",
+                  "live and real-time sources: how long the filter waits for a frame's detection; "
+                  "a later detection is skipped and counted")
+          .flag("publish_frames", &C::publish_frames,
+                "republish every processed frame (capture.publish.*), so lcm-logger captures the "
+                "input and a log can be replayed into slamd")
+          .text("map_save_path", &C::map_save_path,
+                "where SAVE_MAP writes when the command names no file and no --map-out was given")
+          .text("save_dir", &C::save_dir,
+                "the only folder (relative to the working directory, created when needed) a "
+                "SAVE_MAP command received over LCM may name a file in; empty = commands may not "
+                "name files")
+          .number("mapping_nice", &C::mapping_nice, 0, 19, "",
+                  "niceness of the mapping thread (off the capture-to-pose path)")
+          .number("backend_nice", &C::backend_nice, 0, 19, "",
+                  "niceness of the back-end thread (off the capture-to-pose path)")
+          .number("opencv_threads", &C::opencv_threads, 0, 64, "threads",
+                  "OpenCV's own worker threads; 0 runs every OpenCV call on the stage thread that "
+                  "makes it (a hidden pool would compete with the stage threads)")
+          .text("world_frame", &C::world_frame, "world frame name in published poses")
+          .text("camera_frame", &C::camera_frame, "camera frame name in published poses");
+  return table;
+}
+
 DaemonConfig DaemonConfig::load(Config& config) {
   DaemonConfig c;
-  c.source = config.getString("daemon.source", c.source);
-  c.trajectory_out = config.getString("daemon.trajectory_out", c.trajectory_out);
-  c.map_out = config.getString("daemon.map_out", c.map_out);
-  c.groundtruth_out = config.getString("daemon.groundtruth_out", c.groundtruth_out);
-  c.metrics_out = config.getString("daemon.metrics_out", c.metrics_out);
-  c.status_period_s = config.getDouble("daemon.status_period_s", c.status_period_s, 0.05, 60.0);
-  c.drain_deadline_s = config.getDouble("daemon.drain_deadline_s", c.drain_deadline_s, 0.0, 600.0);
-  c.heartbeat_period_s =
-      config.getDouble("daemon.heartbeat_period_s", c.heartbeat_period_s, 0.01, 10.0);
-  c.tracking_queue = config.getInt("daemon.tracking_queue", c.tracking_queue, 1, 1000);
-  c.filter_queue = config.getInt("daemon.filter_queue", c.filter_queue, 1, 1000);
-  c.publish_queue = config.getInt("daemon.publish_queue", c.publish_queue, 1, 1000);
-  c.mapping_queue = config.getInt("daemon.mapping_queue", c.mapping_queue, 1, 1000);
-  c.backend_queue = config.getInt("daemon.backend_queue", c.backend_queue, 1, 100000);
-  c.vanishing_point_thread = config.getBool("daemon.vanishing_point_thread",
-                                           c.vanishing_point_thread);
-  c.vanishing_point_wait_ms =
-      config.getDouble("daemon.vanishing_point_wait_ms", c.vanishing_point_wait_ms, 0.0, 1000.0);
-  c.publish_frames = config.getBool("daemon.publish_frames", c.publish_frames);
-  c.mapping_enabled = config.getBool("mapping.enabled", c.mapping_enabled);
-  c.map_keyframes_only = config.getBool("mapping.keyframes_only", c.map_keyframes_only);
-  c.map_save_path = config.getString("daemon.map_save_path", c.map_save_path);
-  c.save_dir = config.getString("daemon.save_dir", c.save_dir);
-  c.mapping_nice = config.getInt("daemon.mapping_nice", c.mapping_nice, 0, 19);
-  c.backend_nice = config.getInt("daemon.backend_nice", c.backend_nice, 0, 19);
-  c.opencv_threads = config.getInt("daemon.opencv_threads", c.opencv_threads, 0, 64);
-  c.world_frame = config.getString("daemon.world_frame", c.world_frame);
-  c.camera_frame = config.getString("daemon.camera_frame", c.camera_frame);
+  schema().load(config, c);
   if (c.source.empty()) throw ConfigError("daemon.source must not be empty");
   return c;
 }

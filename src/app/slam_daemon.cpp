@@ -235,7 +235,7 @@ struct SlamDaemon::Impl {
     mapping_config = MappingConfig::load(config);
     backend_config = BackendConfig::load(config);
     if (daemon.publish_frames) frame_publisher_config = LcmFramePublisherConfig::load(config);
-    if (daemon.mapping_enabled) mapper = std::make_unique<Mapper>(mapping_config);
+    if (mapping_config.enabled) mapper = std::make_unique<Mapper>(mapping_config);
     if (backend_config.enabled) {
       std::shared_ptr<const Vocabulary> vocabulary;
       try {
@@ -435,7 +435,7 @@ int SlamDaemon::Impl::run(ShutdownSignals& signals) {
                                                                  : "EKF, no vanishing points")
                                : "off: odometry chained")
                        << "), publish, mapping ("
-                       << (mapper ? (daemon.map_keyframes_only ? "keyframes" : "every frame")
+                       << (mapper ? (mapping_config.keyframes_only ? "keyframes" : "every frame")
                                   : "off")
                        << "), back end ("
                        << (backend ? "loop closing, relocalisation, pose graph"
@@ -944,7 +944,7 @@ void SlamDaemon::Impl::runMappingStep(LcmBus& bus, const EstimatedPacket& packet
   if (packet.frame && packet.odometry &&
       packet.pose.tracking_state != TrackingState::kLost &&
       packet.pose.tracking_state != TrackingState::kNotInitialized &&
-      (!daemon.map_keyframes_only || packet.odometry->is_keyframe)) {
+      (!mapping_config.keyframes_only || packet.odometry->is_keyframe)) {
     std::optional<std::int64_t> keyframe_id;
     if (packet.odometry->is_keyframe && packet.odometry->keyframe) {
       keyframe_id = packet.odometry->keyframe->id;

@@ -2,93 +2,131 @@
 
 namespace slamd {
 
-const char* robustKernelName(RobustKernel kernel) {
-  switch (kernel) {
-    case RobustKernel::kNone: return "none";
-    case RobustKernel::kHuber: return "huber";
-    case RobustKernel::kCauchy: return "cauchy";
-  }
-  return "unknown";
+namespace {
+
+const EnumNames<RobustKernel> kRobustKernelNames = {
+    {RobustKernel::kNone, "none", "plain least squares"},
+    {RobustKernel::kHuber, "huber", "bounds the pull of a wrong edge"},
+    {RobustKernel::kCauchy, "cauchy",
+     "rejects wrong loops almost completely (warm-started with Huber)"},
+};
+
+}  // namespace
+
+const char* robustKernelName(RobustKernel kernel) { return enumText(kRobustKernelNames, kernel); }
+
+const ConfigSchema<BackendConfig>& BackendConfig::schema() {
+  using C = BackendConfig;
+  static const auto table =
+      ConfigSchema<C>("backend")
+          .flag("enabled", &C::enabled, "run the back end (loop closing, pose graph)")
+          .choice("robust_kernel", &C::robust_kernel, kRobustKernelNames,
+                  "kernel on robust edges (loop edges; odometry edges too with "
+                  "robust_odometry_edges)")
+          .number("robust_kernel_width", &C::robust_kernel_width, 0.01, 100.0, "sigmas",
+                  "whitened error where the kernel leaves the quadratic")
+          .flag("robust_odometry_edges", &C::robust_odometry_edges,
+                "apply the kernel to odometry edges")
+          .number("max_iterations", &C::max_iterations, 1, 1000, "",
+                  "Levenberg-Marquardt iterations")
+          .number("initial_lambda", &C::initial_lambda, 1e-12, 1e6, "",
+                  "initial LM damping, relative to the diagonal of the normal equations")
+          .number("relative_cost_tolerance", &C::relative_cost_tolerance, 0.0, 1.0, "",
+                  "stop when an accepted step lowers the cost by less than this fraction")
+          .number("step_tolerance", &C::step_tolerance, 0.0, 1.0, "m, rad",
+                  "stop when the update's tangent norm is this small")
+          .number("odometry_sigma_ratio", &C::odometry_sigma_ratio, 1e-4, 1.0, "m/m",
+                  "odometry edge translation sigma per metre between the keyframes (plus 5 mm), "
+                  "per axis")
+          .number("odometry_sigma_rad", &C::odometry_sigma_rad, 1e-5, 1.0, "rad",
+                  "odometry edge rotation sigma, per axis")
+          .number("vocabulary_branching", &C::vocabulary_branching, 2, 32, "",
+                  "children per vocabulary node")
+          .number("vocabulary_depth", &C::vocabulary_depth, 1, 6, "",
+                  "levels of the vocabulary tree (words = branching^depth at most)")
+          .number("loop_min_score", &C::loop_min_score, 0.0, 1.0, "",
+                  "minimum TF-IDF cosine similarity (L1-normalised BoW vectors) of a loop "
+                  "candidate")
+          .number("loop_min_score_ratio", &C::loop_min_score_ratio, 0.0, 10.0, "",
+                  "minimum score relative to the score against the previous keyframe (0 "
+                  "disables)")
+          .number("loop_exclude_recent", &C::loop_exclude_recent, 0, 100000, "keyframes",
+                  "the latest keyframes never considered as loop candidates")
+          .number("loop_max_candidates", &C::loop_max_candidates, 1, 100, "",
+                  "candidates verified per keyframe")
+          .number("loop_min_inliers", &C::loop_min_inliers, 6, 10000, "",
+                  "RANSAC + refinement inliers for a geometrically verified loop")
+          .number("loop_inlier_threshold_px", &C::loop_inlier_threshold_px, 0.5, 50.0, "px",
+                  "RANSAC reprojection threshold")
+          .number("loop_ransac_iterations", &C::loop_ransac_iterations, 10, 100000, "",
+                  "RANSAC hypotheses of a loop verification")
+          .number("loop_match_ratio", &C::loop_match_ratio, 0.3, 1.0, "",
+                  "descriptor ratio test")
+          .number("loop_max_descriptor_distance", &C::loop_max_descriptor_distance, 1, 256,
+                  "bits", "Hamming distance above which a match is discarded")
+          .flag("align_patches", &C::align_patches,
+                "before refining a verified match, align each inlier's reference patch in the "
+                "query image (sub-pixel, as tracking does); off uses the ORB keypoint positions")
+          .number("loop_consistency", &C::loop_consistency, 1, 20, "keyframes",
+                  "consecutive keyframes whose verified candidates must agree before a loop is "
+                  "accepted")
+          .number("loop_consistency_window", &C::loop_consistency_window, 0, 1000,
+                  "keyframe ids", "how far apart two candidate ids may be and still agree")
+          .flag("loop_check_odometry", &C::loop_check_odometry,
+                "reject a verified loop that disagrees with odometry by more than "
+                "loop_max_drift_m + loop_max_drift_ratio * path length (perceptual aliasing)")
+          .number("loop_max_drift_m", &C::loop_max_drift_m, 0.0, 1000.0, "m",
+                  "constant part of the allowed disagreement")
+          .number("loop_max_drift_ratio", &C::loop_max_drift_ratio, 0.0, 10.0, "m/m",
+                  "allowed disagreement per metre travelled")
+          .number("local_edges", &C::local_edges, 0, 50, "",
+                  "geometric edges from each new keyframe to earlier keyframes that see the same "
+                  "place; 0 = loops only")
+          .number("local_max_candidates", &C::local_max_candidates, 1, 200, "",
+                  "candidates verified per keyframe for local edges (best BoW scores first)")
+          .number("local_min_inliers", &C::local_min_inliers, 6, 10000, "",
+                  "inliers after refinement for a local edge")
+          .number("local_search_radius_px", &C::local_search_radius_px, 2.0, 1000.0, "px",
+                  "local edges match only this far from where the graph's estimate projects "
+                  "each point")
+          .number("local_max_discrepancy_m", &C::local_max_discrepancy_m, 0.0, 100.0, "m",
+                  "reject a local edge whose translation disagrees with the graph's estimate by "
+                  "more than this (plus the ratio times the path between the keyframes)")
+          .number("local_max_discrepancy_ratio", &C::local_max_discrepancy_ratio, 0.0, 10.0,
+                  "m/m", "allowed translation disagreement per metre travelled")
+          .number("local_max_discrepancy_rad", &C::local_max_discrepancy_rad, 0.0, 3.2, "rad",
+                  "the same for the rotation")
+          .number("local_min_sigma_m", &C::local_min_sigma_m, 0.0, 1.0, "m",
+                  "floor added in quadrature to a local edge's translation sigma")
+          .number("local_min_sigma_rad", &C::local_min_sigma_rad, 0.0, 1.0, "rad",
+                  "floor added in quadrature to a local edge's rotation sigma")
+          .flag("optimize_every_keyframe", &C::optimize_every_keyframe,
+                "re-optimise after every keyframe that brought a local edge (otherwise only "
+                "after loops and relocalisations)")
+          .number("local_max_iterations", &C::local_max_iterations, 1, 1000, "",
+                  "LM iterations of an optimisation brought only by local edges (warm-started)")
+          .number("local_window_hops", &C::local_window_hops, 0, 100, "edges",
+                  "a local optimisation moves only keyframes within this many edges of the new "
+                  "one; 0 = always optimise the whole graph")
+          .number("local_window_size", &C::local_window_size, 2, 100000, "keyframes",
+                  "at most this many keyframes in the local window, nearest first")
+          .number("full_optimization_chi2", &C::full_optimization_chi2, 0.0, 1e12, "",
+                  "a loop edge, or a local edge beyond the window, whose whitened squared error "
+                  "exceeds this re-optimises the whole graph")
+          .flag("relocalization", &C::relocalization,
+                "match a keyframe that starts a new tracking segment (after LOST) against every "
+                "earlier segment's keyframes; a match ties the segment back into the map")
+          .number("relocalization_min_inliers", &C::relocalization_min_inliers, 6, 10000, "",
+                  "inliers after refinement for a relocalisation")
+          .text("vocabulary_file", &C::vocabulary_file,
+                "vocabulary written by slamd-vocabulary; empty = train one at start-up on the "
+                "synthetic room (about a second)");
+  return table;
 }
 
 BackendConfig BackendConfig::load(Config& config) {
   BackendConfig c;
-  c.enabled = config.getBool("backend.enabled", c.enabled);
-  const std::string kernel = config.getChoice("backend.robust_kernel", "cauchy",
-                                              {"none", "huber", "cauchy"});
-  c.robust_kernel = kernel == "none"    ? RobustKernel::kNone
-                    : kernel == "huber" ? RobustKernel::kHuber
-                                        : RobustKernel::kCauchy;
-  c.robust_kernel_width =
-      config.getDouble("backend.robust_kernel_width", c.robust_kernel_width, 0.01, 100.0);
-  c.robust_odometry_edges =
-      config.getBool("backend.robust_odometry_edges", c.robust_odometry_edges);
-  c.max_iterations = config.getInt("backend.max_iterations", c.max_iterations, 1, 1000);
-  c.initial_lambda = config.getDouble("backend.initial_lambda", c.initial_lambda, 1e-12, 1e6);
-  c.relative_cost_tolerance = config.getDouble("backend.relative_cost_tolerance",
-                                               c.relative_cost_tolerance, 0.0, 1.0);
-  c.step_tolerance = config.getDouble("backend.step_tolerance", c.step_tolerance, 0.0, 1.0);
-  c.odometry_sigma_ratio =
-      config.getDouble("backend.odometry_sigma_ratio", c.odometry_sigma_ratio, 1e-4, 1.0);
-  c.odometry_sigma_rad =
-      config.getDouble("backend.odometry_sigma_rad", c.odometry_sigma_rad, 1e-5, 1.0);
-  c.vocabulary_branching =
-      config.getInt("backend.vocabulary_branching", c.vocabulary_branching, 2, 32);
-  c.vocabulary_depth = config.getInt("backend.vocabulary_depth", c.vocabulary_depth, 1, 6);
-  c.loop_min_score = config.getDouble("backend.loop_min_score", c.loop_min_score, 0.0, 1.0);
-  c.loop_min_score_ratio =
-      config.getDouble("backend.loop_min_score_ratio", c.loop_min_score_ratio, 0.0, 10.0);
-  c.loop_exclude_recent =
-      config.getInt("backend.loop_exclude_recent", c.loop_exclude_recent, 0, 100000);
-  c.loop_max_candidates =
-      config.getInt("backend.loop_max_candidates", c.loop_max_candidates, 1, 100);
-  c.loop_min_inliers = config.getInt("backend.loop_min_inliers", c.loop_min_inliers, 6, 10000);
-  c.loop_inlier_threshold_px = config.getDouble("backend.loop_inlier_threshold_px",
-                                                c.loop_inlier_threshold_px, 0.5, 50.0);
-  c.loop_ransac_iterations =
-      config.getInt("backend.loop_ransac_iterations", c.loop_ransac_iterations, 10, 100000);
-  c.loop_match_ratio =
-      config.getDouble("backend.loop_match_ratio", c.loop_match_ratio, 0.3, 1.0);
-  c.loop_max_descriptor_distance = config.getInt("backend.loop_max_descriptor_distance",
-                                                 c.loop_max_descriptor_distance, 1, 256);
-  c.align_patches = config.getBool("backend.align_patches", c.align_patches);
-  c.loop_consistency = config.getInt("backend.loop_consistency", c.loop_consistency, 1, 20);
-  c.loop_consistency_window =
-      config.getInt("backend.loop_consistency_window", c.loop_consistency_window, 0, 1000);
-  c.loop_check_odometry = config.getBool("backend.loop_check_odometry", c.loop_check_odometry);
-  c.loop_max_drift_m =
-      config.getDouble("backend.loop_max_drift_m", c.loop_max_drift_m, 0.0, 1000.0);
-  c.loop_max_drift_ratio =
-      config.getDouble("backend.loop_max_drift_ratio", c.loop_max_drift_ratio, 0.0, 10.0);
-  c.local_edges = config.getInt("backend.local_edges", c.local_edges, 0, 50);
-  c.local_max_candidates =
-      config.getInt("backend.local_max_candidates", c.local_max_candidates, 1, 200);
-  c.local_min_inliers = config.getInt("backend.local_min_inliers", c.local_min_inliers, 6, 10000);
-  c.local_search_radius_px = config.getDouble("backend.local_search_radius_px",
-                                              c.local_search_radius_px, 2.0, 1000.0);
-  c.local_max_discrepancy_m = config.getDouble("backend.local_max_discrepancy_m",
-                                               c.local_max_discrepancy_m, 0.0, 100.0);
-  c.local_max_discrepancy_ratio = config.getDouble("backend.local_max_discrepancy_ratio",
-                                                   c.local_max_discrepancy_ratio, 0.0, 10.0);
-  c.local_max_discrepancy_rad = config.getDouble("backend.local_max_discrepancy_rad",
-                                                 c.local_max_discrepancy_rad, 0.0, 3.2);
-  c.local_min_sigma_m =
-      config.getDouble("backend.local_min_sigma_m", c.local_min_sigma_m, 0.0, 1.0);
-  c.local_min_sigma_rad =
-      config.getDouble("backend.local_min_sigma_rad", c.local_min_sigma_rad, 0.0, 1.0);
-  c.optimize_every_keyframe =
-      config.getBool("backend.optimize_every_keyframe", c.optimize_every_keyframe);
-  c.local_max_iterations =
-      config.getInt("backend.local_max_iterations", c.local_max_iterations, 1, 1000);
-  c.local_window_hops = config.getInt("backend.local_window_hops", c.local_window_hops, 0, 100);
-  c.local_window_size =
-      config.getInt("backend.local_window_size", c.local_window_size, 2, 100000);
-  c.full_optimization_chi2 = config.getDouble("backend.full_optimization_chi2",
-                                              c.full_optimization_chi2, 0.0, 1e12);
-  c.relocalization = config.getBool("backend.relocalization", c.relocalization);
-  c.relocalization_min_inliers = config.getInt("backend.relocalization_min_inliers",
-                                               c.relocalization_min_inliers, 6, 10000);
-  c.vocabulary_file = config.getString("backend.vocabulary_file", c.vocabulary_file);
+  schema().load(config, c);
   return c;
 }
 

@@ -2,23 +2,48 @@
 
 namespace slamd {
 
+namespace {
+
+const EnumNames<DistortionModel> kDistortionModelNames = {
+    {DistortionModel::kNone, "none", "ideal pinhole"},
+    {DistortionModel::kPlumbBob, "plumb_bob", "radial-tangential [k1, k2, p1, p2, k3]"},
+};
+
+}  // namespace
+
+const ConfigSchema<CameraConfig>& CameraConfig::schema() {
+  using C = CameraConfig;
+  static const auto table =
+      ConfigSchema<C>("camera")
+          .number("fx", [](auto& c) -> auto& { return c.intrinsics.fx; }, 1e-6, 1e5, "px",
+                  "focal length along x")
+          .number("fy", [](auto& c) -> auto& { return c.intrinsics.fy; }, 1e-6, 1e5, "px",
+                  "focal length along y")
+          .number("cx", [](auto& c) -> auto& { return c.intrinsics.cx; }, -1e5, 1e5, "px",
+                  "principal point x")
+          .number("cy", [](auto& c) -> auto& { return c.intrinsics.cy; }, -1e5, 1e5, "px",
+                  "principal point y")
+          .number("width", [](auto& c) -> auto& { return c.intrinsics.width; }, 1, 16384, "px",
+                  "image width")
+          .number("height", [](auto& c) -> auto& { return c.intrinsics.height; }, 1, 16384,
+                  "px", "image height")
+          .choice("distortion_model",
+                  [](auto& c) -> auto& { return c.intrinsics.distortion_model; },
+                  kDistortionModelNames, "lens distortion model")
+          .list("distortion", [](auto& c) -> auto& { return c.intrinsics.distortion; }, "",
+                "[k1, k2, p1, p2, k3] of plumb_bob")
+          .number("depth_scale", &C::depth_scale, 1e-6, 1e6, "raw units per metre",
+                  "raw depth units per metre; default by source: 5000 for TUM folders and "
+                  "synthetic worlds, 1000 for OpenNI2 and LCM (millimetres)")
+          .describedDefault("by source");
+  return table;
+}
+
 CameraConfig CameraConfig::load(Config& config, double default_depth_scale) {
   CameraConfig out;
-  CameraIntrinsics& k = out.intrinsics;
-  k.fx = config.getDouble("camera.fx", k.fx, 1e-6, 1e5);
-  k.fy = config.getDouble("camera.fy", k.fy, 1e-6, 1e5);
-  k.cx = config.getDouble("camera.cx", k.cx, -1e5, 1e5);
-  k.cy = config.getDouble("camera.cy", k.cy, -1e5, 1e5);
-  k.width = config.getInt("camera.width", k.width, 1, 16384);
-  k.height = config.getInt("camera.height", k.height, 1, 16384);
-  const std::string model =
-      config.getChoice("camera.distortion_model", "none", {"none", "plumb_bob"});
-  k.distortion_model = model == "plumb_bob" ? DistortionModel::kPlumbBob : DistortionModel::kNone;
-  const std::vector<double> distortion =
-      config.getDoubleList("camera.distortion", {0.0, 0.0, 0.0, 0.0, 0.0}, 5);
-  for (std::size_t i = 0; i < k.distortion.size(); ++i) k.distortion[i] = distortion[i];
-  out.depth_scale = config.getDouble("camera.depth_scale", default_depth_scale, 1e-6, 1e6);
-  const std::string error = k.validationError();
+  out.depth_scale = default_depth_scale;
+  schema().load(config, out);
+  const std::string error = out.intrinsics.validationError();
   if (!error.empty()) throw ConfigError("camera: " + error);
   return out;
 }

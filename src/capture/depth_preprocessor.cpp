@@ -9,27 +9,39 @@
 
 namespace slamd {
 
+const ConfigSchema<DepthPreprocessorConfig>& DepthPreprocessorConfig::schema() {
+  using C = DepthPreprocessorConfig;
+  static const auto table =
+      ConfigSchema<C>("capture.preprocess")
+          .flag("range_gate", &C::range_gate, "drop depth outside [min_depth_m, max_depth_m]")
+          .number("min_depth_m", &C::min_depth_m, 0.0, 100.0, "m", "nearest depth kept")
+          .number("max_depth_m", &C::max_depth_m, 0.0, 100.0, "m",
+                  "farthest depth kept; > min_depth_m")
+          .flag("flying_pixels", &C::flying_pixels,
+                "remove pixels floating between a foreground edge and the background, and "
+                "isolated speckle")
+          .number("flying_jump_ratio", &C::jump_ratio, 1e-4, 1.0, "",
+                  "a neighbour differing by more than this fraction of the depth is a jump")
+          .number("flying_min_support", &C::min_support, 0, 8, "neighbours",
+                  "a pixel with fewer of its 8 neighbours within the jump is speckle")
+          .flag("bilateral", &C::bilateral, "edge-preserving bilateral smoothing of the depth")
+          .number("bilateral_radius_px", &C::bilateral_radius_px, 1, 7, "px",
+                  "bilateral filter radius")
+          .number("bilateral_spatial_sigma_px", &C::spatial_sigma_px, 1e-3, 20.0, "px",
+                  "bilateral spatial sigma")
+          .number("bilateral_range_sigma_ratio", &C::range_sigma_ratio, 1e-4, 1.0, "",
+                  "bilateral range sigma as a fraction of the depth (noise grows with depth)");
+  return table;
+}
+
 DepthPreprocessorConfig DepthPreprocessorConfig::load(Config& config) {
   DepthPreprocessorConfig out;
-  out.range_gate = config.getBool("capture.preprocess.range_gate", out.range_gate);
-  out.min_depth_m = config.getDouble("capture.preprocess.min_depth_m", out.min_depth_m, 0.0, 100.0);
-  out.max_depth_m = config.getDouble("capture.preprocess.max_depth_m", out.max_depth_m, 0.0, 100.0);
+  schema().load(config, out);
   if (out.max_depth_m <= out.min_depth_m) {
     throw ConfigError(
         "capture.preprocess.max_depth_m=" + std::to_string(out.max_depth_m) +
         " must be greater than capture.preprocess.min_depth_m=" + std::to_string(out.min_depth_m));
   }
-  out.flying_pixels = config.getBool("capture.preprocess.flying_pixels", out.flying_pixels);
-  out.jump_ratio =
-      config.getDouble("capture.preprocess.flying_jump_ratio", out.jump_ratio, 1e-4, 1.0);
-  out.min_support = config.getInt("capture.preprocess.flying_min_support", out.min_support, 0, 8);
-  out.bilateral = config.getBool("capture.preprocess.bilateral", out.bilateral);
-  out.bilateral_radius_px =
-      config.getInt("capture.preprocess.bilateral_radius_px", out.bilateral_radius_px, 1, 7);
-  out.spatial_sigma_px = config.getDouble("capture.preprocess.bilateral_spatial_sigma_px",
-                                          out.spatial_sigma_px, 1e-3, 20.0);
-  out.range_sigma_ratio = config.getDouble("capture.preprocess.bilateral_range_sigma_ratio",
-                                           out.range_sigma_ratio, 1e-4, 1.0);
   return out;
 }
 

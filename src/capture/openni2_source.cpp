@@ -109,27 +109,6 @@ bool selectMode(const openni::SensorInfo& info, int width, int height, int fps, 
 
 }  // namespace
 
-OpenNi2Config OpenNi2Config::load(Config& config) {
-  OpenNi2Config out;
-  out.camera = CameraConfig::load(config, 1000.0);
-  out.intrinsics_from_device =
-      config.getChoice("capture.openni2.intrinsics", "config", {"config", "device"}) == "device";
-  out.width = config.getInt("capture.openni2.width", out.width, 1, 4096);
-  out.height = config.getInt("capture.openni2.height", out.height, 1, 4096);
-  out.fps = config.getInt("capture.openni2.fps", out.fps, 1, 120);
-  out.registration = config.getBool("capture.openni2.registration", out.registration);
-  out.sync = config.getBool("capture.openni2.sync", out.sync);
-  out.color = config.getBool("capture.openni2.color", out.color);
-  out.frame_timeout_s =
-      config.getDouble("capture.openni2.frame_timeout_s", out.frame_timeout_s, 1e-3, 60.0);
-  out.reconnect_initial_s =
-      config.getDouble("capture.openni2.reconnect_initial_s", out.reconnect_initial_s, 1e-3, 60.0);
-  out.reconnect_max_s =
-      config.getDouble("capture.openni2.reconnect_max_s", out.reconnect_max_s, 1e-3, 600.0);
-  out.oni_realtime = config.getBool("capture.oni.realtime", out.oni_realtime);
-  return out;
-}
-
 std::vector<std::string> listOpenNi2Devices() {
   ensureOpenNi();
   openni::Array<openni::DeviceInfo> devices;

@@ -6,30 +6,35 @@
 
 namespace slamd {
 
+namespace {
+
+const EnumNames<PacingMode> kPacingModeNames = {
+    {PacingMode::kAsFastAsPossible, "fastest", "as fast as the stages take frames"},
+    {PacingMode::kRealTime, "realtime", "on the recorded clock, times speed"},
+    {PacingMode::kFixedRate, "fixed", "at rate_hz"},
+};
+
+}  // namespace
+
+const ConfigSchema<PacingConfig>& PacingConfig::schema() {
+  using C = PacingConfig;
+  static const auto table =
+      ConfigSchema<C>("capture.pacing")
+          .choice("mode", &C::mode, kPacingModeNames, "how recorded frames are paced")
+          .number("speed", &C::speed, 1e-3, 100.0, "", "real-time multiplier of realtime")
+          .number("rate_hz", &C::rate_hz, 1e-3, 1000.0, "Hz", "frame rate of fixed")
+          .number("max_lag_s", &C::max_lag_s, 1e-3, 60.0, "s",
+                  "sources that must be read to advance drop frames read later than this");
+  return table;
+}
+
 PacingConfig PacingConfig::load(Config& config) {
   PacingConfig out;
-  const std::string mode =
-      config.getChoice("capture.pacing.mode", "fastest", {"fastest", "realtime", "fixed"});
-  out.mode = mode == "realtime" ? PacingMode::kRealTime
-             : mode == "fixed"  ? PacingMode::kFixedRate
-                                : PacingMode::kAsFastAsPossible;
-  out.speed = config.getDouble("capture.pacing.speed", out.speed, 1e-3, 100.0);
-  out.rate_hz = config.getDouble("capture.pacing.rate_hz", out.rate_hz, 1e-3, 1000.0);
-  out.max_lag_s = config.getDouble("capture.pacing.max_lag_s", out.max_lag_s, 1e-3, 60.0);
+  schema().load(config, out);
   return out;
 }
 
-const char* pacingModeName(PacingMode mode) {
-  switch (mode) {
-    case PacingMode::kRealTime:
-      return "realtime";
-    case PacingMode::kFixedRate:
-      return "fixed";
-    case PacingMode::kAsFastAsPossible:
-      break;
-  }
-  return "fastest";
-}
+const char* pacingModeName(PacingMode mode) { return enumText(kPacingModeNames, mode); }
 
 PacedSource::PacedSource(std::unique_ptr<FrameSource> inner, PacingConfig config)
     : inner_(std::move(inner)), config_(config) {}

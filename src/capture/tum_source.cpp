@@ -19,14 +19,25 @@ std::string joinPath(const std::string& folder, const std::string& relative) {
 
 }  // namespace
 
+const ConfigSchema<TumSourceConfig>& TumSourceConfig::schema() {
+  using C = TumSourceConfig;
+  static const auto table =
+      ConfigSchema<C>("capture.tum")
+          .number("max_difference_s", &C::max_difference_s, 1e-6, 1.0, "s",
+                  "largest time difference of an associated depth and colour image")
+          .number("time_offset_s", &C::time_offset_s, -10.0, 10.0, "s",
+                  "added to the depth times before association")
+          .text("associations", &C::associations,
+                "association file (relative to the folder); empty = associate by time")
+          .text("groundtruth", &C::groundtruth,
+                "ground-truth file (relative to the folder); empty = none");
+  return table;
+}
+
 TumSourceConfig TumSourceConfig::load(Config& config) {
   TumSourceConfig out;
   out.camera = CameraConfig::load(config, 5000.0);
-  out.max_difference_s =
-      config.getDouble("capture.tum.max_difference_s", out.max_difference_s, 1e-6, 1.0);
-  out.time_offset_s = config.getDouble("capture.tum.time_offset_s", out.time_offset_s, -10.0, 10.0);
-  out.associations = config.getString("capture.tum.associations", out.associations);
-  out.groundtruth = config.getString("capture.tum.groundtruth", out.groundtruth);
+  schema().load(config, out);
   return out;
 }
 

@@ -57,16 +57,6 @@ int yamlNestingEstimate(const std::string& text) {
   return deepest;
 }
 
-// Shortest text that reads back as the same double.
-std::string formatDouble(double value) {
-  char buffer[64];
-  for (int precision = 6; precision <= 17; ++precision) {
-    std::snprintf(buffer, sizeof(buffer), "%.*g", precision, value);
-    if (std::strtod(buffer, nullptr) == value) break;
-  }
-  return buffer;
-}
-
 bool parseDouble(const std::string& text, double& value) {
   const std::string t = trim(text);
   if (t.empty()) return false;
@@ -89,7 +79,18 @@ std::string lower(std::string text) {
   return text;
 }
 
+std::string formatDouble(double value) { return formatConfigNumber(value); }
+
 }  // namespace
+
+std::string formatConfigNumber(double value) {
+  char buffer[64];
+  for (int precision = 6; precision <= 17; ++precision) {
+    std::snprintf(buffer, sizeof(buffer), "%.*g", precision, value);
+    if (std::strtod(buffer, nullptr) == value) break;
+  }
+  return buffer;
+}
 
 Config Config::fromFile(const std::string& path) {
   // Only a regular file of bounded size: a directory would read as empty (silently all defaults),
@@ -275,6 +276,12 @@ std::vector<double> Config::getDoubleList(const std::string& key,
   }
   recordUsed(key, used + "]");
   return values;
+}
+
+std::vector<std::string> Config::usedKeys() const {
+  std::vector<std::string> keys;
+  for (const auto& entry : used_values_) keys.push_back(entry.first);
+  return keys;
 }
 
 std::vector<std::string> Config::unknownKeys() const {

@@ -2,29 +2,46 @@
 
 namespace slamd {
 
-namespace {
-std::string channelName(Config& config, const std::string& key, const std::string& default_name) {
-  const std::string name = config.getString("channels." + key, default_name);
-  if (name.empty() || name.find_first_of(" \t\n") != std::string::npos) {
-    throw ConfigError("channels." + key + " = '" + name +
-                      "': a channel name must be non-empty and contain no whitespace");
-  }
-  return name;
+const ConfigSchema<LcmConfig>& LcmConfig::schema() {
+  static const auto table = ConfigSchema<LcmConfig>("lcm").text(
+      "url", &LcmConfig::url,
+      "LCM URL (--lcm-url); empty = $LCM_DEFAULT_URL or LCM's default");
+  return table;
 }
-}  // namespace
+
+LcmConfig LcmConfig::load(Config& config) {
+  LcmConfig out;
+  schema().load(config, out);
+  return out;
+}
+
+const ConfigSchema<ChannelConfig>& ChannelConfig::schema() {
+  using C = ChannelConfig;
+  static const auto table =
+      ConfigSchema<C>("channels")
+          .text("pose", &C::pose, "slamd.pose_t, one per frame")
+          .text("bot_pose", &C::bot_pose, "bot_core.pose_t, one per frame")
+          .text("odometry", &C::odometry, "slamd.odometry_t")
+          .text("vanishing_point", &C::vanishing_point, "detected vanishing points")
+          .text("map_update", &C::map_update, "voxel_map_update_t")
+          .text("map", &C::map, "full voxel_map_t")
+          .text("keyframes", &C::keyframes, "optimised keyframe poses")
+          .text("status", &C::status, "SLAMD_STATUS (daemon.status_period_s)")
+          .text("command", &C::command, "slamd.command_t received");
+  return table;
+}
 
 ChannelConfig ChannelConfig::load(Config& config) {
   ChannelConfig c;
-  c.lcm_url = config.getString("lcm.url", c.lcm_url);
-  c.pose = channelName(config, "pose", c.pose);
-  c.bot_pose = channelName(config, "bot_pose", c.bot_pose);
-  c.odometry = channelName(config, "odometry", c.odometry);
-  c.vanishing_point = channelName(config, "vanishing_point", c.vanishing_point);
-  c.map_update = channelName(config, "map_update", c.map_update);
-  c.map = channelName(config, "map", c.map);
-  c.keyframes = channelName(config, "keyframes", c.keyframes);
-  c.status = channelName(config, "status", c.status);
-  c.command = channelName(config, "command", c.command);
+  c.lcm_url = LcmConfig::load(config).url;
+  schema().load(config, c);
+  for (const ConfigKeyDescription& key : schema().describe(c)) {
+    const std::string& name = key.default_value;  // the loaded value
+    if (name.empty() || name.find_first_of(" \t\n") != std::string::npos) {
+      throw ConfigError(key.key + " = '" + name +
+                        "': a channel name must be non-empty and contain no whitespace");
+    }
+  }
   return c;
 }
 

@@ -153,19 +153,46 @@ cv::Mat rawU16FromBytes(const std::uint8_t* data, std::size_t size, int width, i
 
 }  // namespace
 
+const EnumNames<ColorEncoding>& colorEncodingNames() {
+  static const EnumNames<ColorEncoding> names = {
+      {ColorEncoding::kJpeg, "jpeg", "JPEG"},
+      {ColorEncoding::kPng, "png", "lossless PNG"},
+      {ColorEncoding::kRgb8, "rgb8", "raw RGB bytes"},
+      {ColorEncoding::kBgr8, "bgr8", "raw BGR bytes"},
+  };
+  return names;
+}
+
+const EnumNames<DepthEncoding>& depthEncodingNames() {
+  static const EnumNames<DepthEncoding> names = {
+      {DepthEncoding::kZlibU16, "zlib", "zlib-compressed 16-bit (a quarter of PNG's decode time)"},
+      {DepthEncoding::kPngU16, "png", "16-bit PNG"},
+      {DepthEncoding::kRawU16, "raw", "raw 16-bit little-endian"},
+  };
+  return names;
+}
+
+namespace {
+
+template <typename Enum>
+Enum parseEncoding(const EnumNames<Enum>& names, const std::string& text, const char* what) {
+  std::string allowed;
+  for (const auto& name : names) {
+    if (text == name.text) return name.value;
+    allowed += (allowed.empty() ? "" : ", ") + std::string(name.text);
+  }
+  throw std::invalid_argument(std::string(what) + " encoding '" + text +
+                              "': allowed values are " + allowed);
+}
+
+}  // namespace
+
 ColorEncoding parseColorEncoding(const std::string& text) {
-  if (text == "rgb8") return ColorEncoding::kRgb8;
-  if (text == "bgr8") return ColorEncoding::kBgr8;
-  if (text == "jpeg") return ColorEncoding::kJpeg;
-  if (text == "png") return ColorEncoding::kPng;
-  throw std::invalid_argument("colour encoding '" + text + "': allowed values are rgb8, bgr8, jpeg, png");
+  return parseEncoding(colorEncodingNames(), text, "colour");
 }
 
 DepthEncoding parseDepthEncoding(const std::string& text) {
-  if (text == "raw") return DepthEncoding::kRawU16;
-  if (text == "png") return DepthEncoding::kPngU16;
-  if (text == "zlib") return DepthEncoding::kZlibU16;
-  throw std::invalid_argument("depth encoding '" + text + "': allowed values are raw, png, zlib");
+  return parseEncoding(depthEncodingNames(), text, "depth");
 }
 
 std::vector<std::uint8_t> zlibCompress(const std::uint8_t* data, std::size_t size, int level) {

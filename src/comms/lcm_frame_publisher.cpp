@@ -7,18 +7,37 @@
 
 namespace slamd {
 
+namespace {
+
+const EnumNames<bool> kPublishFormatNames = {
+    {false, "rgbd", "slamd.rgbd_frame_t (with intrinsics)"},
+    {true, "kinect", "kinect.frame_msg_t: JPEG colour when color = jpeg, else raw; zlib depth "
+     "when depth = zlib, else raw millimetres"},
+};
+
+}  // namespace
+
+const ConfigSchema<LcmFramePublisherConfig>& LcmFramePublisherConfig::schema() {
+  using C = LcmFramePublisherConfig;
+  static const auto table =
+      ConfigSchema<C>("capture.publish")
+          .text("channel", &C::channel, "channel of republished frames; not empty")
+          .choice("format", &C::kinect_format, kPublishFormatNames, "message type")
+          .choice("color", [](auto& c) -> auto& { return c.encode.color; },
+                  colorEncodingNames(), "colour encoding")
+          .number("jpeg_quality", [](auto& c) -> auto& { return c.encode.jpeg_quality; }, 1, 100,
+                  "", "JPEG quality")
+          .choice("depth", [](auto& c) -> auto& { return c.encode.depth; },
+                  depthEncodingNames(), "depth encoding")
+          .number("depth_scale", [](auto& c) -> auto& { return c.encode.depth_scale; }, 1.0,
+                  1e5, "raw units per metre", "depth units of the encoded image (1000: mm)");
+  return table;
+}
+
 LcmFramePublisherConfig LcmFramePublisherConfig::load(Config& config) {
   LcmFramePublisherConfig out;
-  out.channel = config.getString("capture.publish.channel", out.channel);
+  schema().load(config, out);
   if (out.channel.empty()) throw ConfigError("capture.publish.channel must not be empty");
-  out.kinect_format =
-      config.getChoice("capture.publish.format", "rgbd", {"rgbd", "kinect"}) == "kinect";
-  out.encode.color = parseColorEncoding(
-      config.getChoice("capture.publish.color", "jpeg", {"jpeg", "png", "rgb8", "bgr8"}));
-  out.encode.jpeg_quality = config.getInt("capture.publish.jpeg_quality", 90, 1, 100);
-  out.encode.depth =
-      parseDepthEncoding(config.getChoice("capture.publish.depth", "zlib", {"zlib", "png", "raw"}));
-  out.encode.depth_scale = config.getDouble("capture.publish.depth_scale", 1000.0, 1.0, 1e5);
   return out;
 }
 

@@ -9,6 +9,7 @@
 
 #include "slamd/capture/image_io.hpp"
 #include "slamd/common/log.hpp"
+#include "slamd/comms/channels.hpp"
 #include "slamd/comms/frame_codec.hpp"
 #include "slamd/comms/message_codec.hpp"
 
@@ -58,22 +59,45 @@ std::string strictJpegToRaw(std::vector<std::uint8_t>& data, bool rgb_order, int
 
 }  // namespace
 
+namespace {
+
+const EnumNames<LcmFrameFormat> kLcmFrameFormatNames = {
+    {LcmFrameFormat::kAuto, "auto", "whichever type the first message has"},
+    {LcmFrameFormat::kRgbdFrame, "rgbd", "slamd.rgbd_frame_t"},
+    {LcmFrameFormat::kKinectFrame, "kinect", "kinect.frame_msg_t (intrinsics from camera.*)"},
+};
+
+}  // namespace
+
+const ConfigSchema<LcmFrameSourceConfig>& LcmFrameSourceConfig::schema() {
+  using C = LcmFrameSourceConfig;
+  static const auto table =
+      ConfigSchema<C>("capture.lcm")
+          .text("url", &C::url, "LCM URL of the frame source; empty = lcm.url")
+          .describedDefault("lcm.url")
+          .choice("format", &C::format, kLcmFrameFormatNames, "message type of the frames")
+          .number("queue_capacity", &C::queue_capacity, 1, 1000, "messages",
+                  "received frames waiting to be read")
+          .number("idle_end_s", &C::idle_end_s, 0.0, 3600.0, "s",
+                  "end the stream after this long without a frame; 0 = never")
+          .number("max_time_jump_s", &C::max_time_jump_s, 1e-3, 86400.0, "s",
+                  "a frame whose timestamp is further than this from the stream's clock is "
+                  "rejected")
+          .number("reanchor_frames", &C::reanchor_frames, 1, 1000, "frames",
+                  "rejected frames in a row, agreeing with each other, after which the stream's "
+                  "clock is re-anchored (it jumped for real)")
+          .number("max_rate_hz", &C::max_rate_hz, 0.0, 1000.0, "Hz",
+                  "the camera's frame rate (60 for a 60 Hz mode); a frame stamped less than "
+                  "0.8 / max_rate_hz after the previous one is dropped before decoding, and "
+                  "counted; 0 = no limit (logs replayed faster than recorded)");
+  return table;
+}
+
 LcmFrameSourceConfig LcmFrameSourceConfig::load(Config& config) {
   LcmFrameSourceConfig out;
   // The program's own LCM URL (lcm.url, set by --lcm-url) unless capture has its own.
-  const std::string program_url = config.has("lcm.url") ? config.getString("lcm.url", "") : "";
-  out.url = config.getString("capture.lcm.url", program_url);
-  const std::string format =
-      config.getChoice("capture.lcm.format", "auto", {"auto", "rgbd", "kinect"});
-  out.format = format == "rgbd"     ? LcmFrameFormat::kRgbdFrame
-               : format == "kinect" ? LcmFrameFormat::kKinectFrame
-                                    : LcmFrameFormat::kAuto;
-  out.queue_capacity = config.getInt("capture.lcm.queue_capacity", out.queue_capacity, 1, 1000);
-  out.idle_end_s = config.getDouble("capture.lcm.idle_end_s", out.idle_end_s, 0.0, 3600.0);
-  out.max_time_jump_s =
-      config.getDouble("capture.lcm.max_time_jump_s", out.max_time_jump_s, 1e-3, 86400.0);
-  out.reanchor_frames = config.getInt("capture.lcm.reanchor_frames", out.reanchor_frames, 1, 1000);
-  out.max_rate_hz = config.getDouble("capture.lcm.max_rate_hz", out.max_rate_hz, 0.0, 1000.0);
+  out.url = LcmConfig::load(config).url;
+  schema().load(config, out);
   out.camera = CameraConfig::load(config, 1000.0);
   return out;
 }

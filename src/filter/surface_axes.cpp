@@ -17,27 +17,44 @@ constexpr double kMinResidualVariance = 1e-8;
 
 }  // namespace
 
-SurfaceAxesConfig SurfaceAxesConfig::load(Config& config, const std::string& prefix) {
+const ConfigSchema<SurfaceAxesConfig>& SurfaceAxesConfig::schema() {
+  using C = SurfaceAxesConfig;
+  static const auto table =
+      ConfigSchema<C>("filter.axes")
+          .number("cell_px", &C::cell_px, 6, 160, "px",
+                  "side of the square cells a plane is fitted in")
+          .number("sample_step_px", &C::sample_step_px, 1, 16, "px",
+                  "depth pixels used inside a cell")
+          .number("min_cell_points", &C::min_cell_points, 3, 10000, "",
+                  "a cell with fewer valid samples is skipped")
+          .number("min_depth_m", &C::min_depth_m, 0.05, 50.0, "m", "nearest depth used")
+          .number("max_depth_m", &C::max_depth_m, 0.05, 50.0, "m",
+                  "farthest depth used; > min_depth_m")
+          .number("max_relative_residual", &C::max_relative_residual, 1e-5, 1.0, "",
+                  "a cell is planar when the RMS residual of its fit in inverse depth is at most "
+                  "this fraction of its mean inverse depth")
+          .number("inlier_angle_deg", &C::inlier_angle_deg, 0.1, 45.0, "deg",
+                  "a cell supports an axis when its normal is within this angle of it (either "
+                  "sign)")
+          .number("orthogonality_deg", &C::orthogonality_deg, 0.1, 45.0, "deg",
+                  "the second and third axes must be this close to perpendicular to the axes "
+                  "already found")
+          .number("min_axis_cells", &C::min_axis_cells, 1, 10000, "",
+                  "fewer supporting cells = no axis")
+          .number("max_axes", &C::max_axes, 1, 3, "", "axes reported at most")
+          .number("min_sigma_deg", &C::min_sigma_deg, 0.001, 10.0, "deg",
+                  "floor of each axis' standard deviation (added in quadrature)");
+  return table;
+}
+
+SurfaceAxesConfig SurfaceAxesConfig::load(Config& config) {
   SurfaceAxesConfig c;
-  const auto key = [&](const char* name) { return prefix + "." + name; };
-  c.cell_px = config.getInt(key("cell_px"), c.cell_px, 6, 160);
-  c.sample_step_px = config.getInt(key("sample_step_px"), c.sample_step_px, 1, 16);
-  c.min_cell_points = config.getInt(key("min_cell_points"), c.min_cell_points, 3, 10000);
-  c.min_depth_m = config.getDouble(key("min_depth_m"), c.min_depth_m, 0.05, 50.0);
-  c.max_depth_m = config.getDouble(key("max_depth_m"), c.max_depth_m, 0.05, 50.0);
+  schema().load(config, c);
   if (c.max_depth_m <= c.min_depth_m) {
-    throw ConfigError(key("max_depth_m") + " (" + std::to_string(c.max_depth_m) +
-                      ") must be greater than " + key("min_depth_m") + " (" +
+    throw ConfigError("filter.axes.max_depth_m (" + std::to_string(c.max_depth_m) +
+                      ") must be greater than filter.axes.min_depth_m (" +
                       std::to_string(c.min_depth_m) + ")");
   }
-  c.max_relative_residual =
-      config.getDouble(key("max_relative_residual"), c.max_relative_residual, 1e-5, 1.0);
-  c.inlier_angle_deg = config.getDouble(key("inlier_angle_deg"), c.inlier_angle_deg, 0.1, 45.0);
-  c.orthogonality_deg =
-      config.getDouble(key("orthogonality_deg"), c.orthogonality_deg, 0.1, 45.0);
-  c.min_axis_cells = config.getInt(key("min_axis_cells"), c.min_axis_cells, 1, 10000);
-  c.max_axes = config.getInt(key("max_axes"), c.max_axes, 1, 3);
-  c.min_sigma_deg = config.getDouble(key("min_sigma_deg"), c.min_sigma_deg, 0.001, 10.0);
   return c;
 }
 

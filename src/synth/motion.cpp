@@ -47,23 +47,34 @@ MotionKind defaultMotionFor(const std::string& scene_name) {
   return MotionKind::kRandom;
 }
 
+const ConfigSchema<MotionParams>& MotionParams::schema() {
+  using C = MotionParams;
+  static const auto table =
+      ConfigSchema<C>("synthetic")
+          .number("rate_hz", &C::rate_hz, 1.0, 120.0, "Hz", "frame rate of sampled trajectories")
+          .number("walk_speed_mps", &C::walk_speed_mps, 0.05, 3.0, "m/s",
+                  "walking speed along the path")
+          .number("walk_height_m", &C::walk_height_m, 0.3, 2.2, "m", "hand-held camera height")
+          .number("zigzag_amplitude_m", &C::zigzag_amplitude_m, 0.0, 2.0, "m",
+                  "lateral zigzag amplitude (capped by the scene's clearance)")
+          .number("zigzag_period_s", &C::zigzag_period_s, 0.5, 60.0, "s",
+                  "one full left-right-left cycle")
+          .number("step_hz", &C::step_hz, 0.5, 4.0, "Hz", "walking step frequency (head bob)")
+          .number("head_bob_m", &C::head_bob_m, 0.0, 0.1, "m", "vertical bob amplitude")
+          .number("robot_speed_mps", &C::robot_speed_mps, 0.05, 3.0, "m/s", "robot speed")
+          .number("robot_height_m", &C::robot_height_m, 0.2, 2.2, "m", "camera height of the robot")
+          .number("max_speed_mps", &C::max_speed_mps, 0.01, 3.0, "m/s",
+                  "peak speed of the random motion")
+          .number("max_angular_rate_radps", &C::max_angular_rate_radps, 0.01, 6.0, "rad/s",
+                  "peak rotation rate of the random motion")
+          .number("max_turn_rate_radps", &C::max_turn_rate_radps, 0.05, 6.0, "rad/s",
+                  "walkers and robots slow down so turns stay below this");
+  return table;
+}
+
 MotionParams MotionParams::load(Config& config) {
   MotionParams p;
-  p.rate_hz = config.getDouble("synthetic.rate_hz", p.rate_hz, 1.0, 120.0);
-  p.walk_speed_mps = config.getDouble("synthetic.walk_speed_mps", p.walk_speed_mps, 0.05, 3.0);
-  p.walk_height_m = config.getDouble("synthetic.walk_height_m", p.walk_height_m, 0.3, 2.2);
-  p.zigzag_amplitude_m =
-      config.getDouble("synthetic.zigzag_amplitude_m", p.zigzag_amplitude_m, 0.0, 2.0);
-  p.zigzag_period_s = config.getDouble("synthetic.zigzag_period_s", p.zigzag_period_s, 0.5, 60.0);
-  p.step_hz = config.getDouble("synthetic.step_hz", p.step_hz, 0.5, 4.0);
-  p.head_bob_m = config.getDouble("synthetic.head_bob_m", p.head_bob_m, 0.0, 0.1);
-  p.robot_speed_mps = config.getDouble("synthetic.robot_speed_mps", p.robot_speed_mps, 0.05, 3.0);
-  p.robot_height_m = config.getDouble("synthetic.robot_height_m", p.robot_height_m, 0.2, 2.2);
-  p.max_speed_mps = config.getDouble("synthetic.max_speed_mps", p.max_speed_mps, 0.01, 3.0);
-  p.max_angular_rate_radps =
-      config.getDouble("synthetic.max_angular_rate_radps", p.max_angular_rate_radps, 0.01, 6.0);
-  p.max_turn_rate_radps =
-      config.getDouble("synthetic.max_turn_rate_radps", p.max_turn_rate_radps, 0.05, 6.0);
+  schema().load(config, p);
   return p;
 }
 

@@ -165,21 +165,30 @@ bool Scene::isFree(const Eigen::Vector3d& p_world, double margin_m) const {
   return true;
 }
 
+const ConfigSchema<SceneParams>& SceneParams::schema() {
+  using C = SceneParams;
+  static const auto table =
+      ConfigSchema<C>("synthetic")
+          .number("texture_density", &C::texture_density, 0.0, 1.0, "",
+                  "0 = nearly featureless walls .. 1 = rich marks")
+          .flag("doors", &C::doors, "doors along corridor walls")
+          .flag("posters", &C::posters, "posters on walls")
+          .number("corridor_length_m", &C::corridor_length_m, 8.0, 200.0, "m",
+                  "length of the corridor scene")
+          .number("corridor_width_m", &C::corridor_width_m, 1.4, 6.0, "m",
+                  "width of the corridor scene")
+          .number("corridor_height_m", &C::corridor_height_m, 2.0, 5.0, "m",
+                  "height of the corridor scene")
+          .number("loop_length_m", &C::loop_length_m, 8.0, 100.0, "m",
+                  "outer x extent of the ring corridor")
+          .number("loop_width_m", &C::loop_width_m, 8.0, 100.0, "m",
+                  "outer y extent of the ring corridor");
+  return table;
+}
+
 SceneParams SceneParams::load(Config& config) {
   SceneParams params;
-  params.texture_density =
-      config.getDouble("synthetic.texture_density", params.texture_density, 0.0, 1.0);
-  params.doors = config.getBool("synthetic.doors", params.doors);
-  params.posters = config.getBool("synthetic.posters", params.posters);
-  params.corridor_length_m =
-      config.getDouble("synthetic.corridor_length_m", params.corridor_length_m, 8.0, 200.0);
-  params.corridor_width_m =
-      config.getDouble("synthetic.corridor_width_m", params.corridor_width_m, 1.4, 6.0);
-  params.corridor_height_m =
-      config.getDouble("synthetic.corridor_height_m", params.corridor_height_m, 2.0, 5.0);
-  params.loop_length_m =
-      config.getDouble("synthetic.loop_length_m", params.loop_length_m, 8.0, 100.0);
-  params.loop_width_m = config.getDouble("synthetic.loop_width_m", params.loop_width_m, 8.0, 100.0);
+  schema().load(config, params);
   return params;
 }
 

@@ -27,38 +27,58 @@ SensorParams SensorParams::exact() {
   p.color_noise_std = 0.0;
   p.exposure_variation = 0.0;
   p.motion_blur = false;
+  p.exact_mode = true;
   return p;
 }
 
+const ConfigSchema<SensorParams>& SensorParams::schema() {
+  using C = SensorParams;
+  static const auto table =
+      ConfigSchema<C>("synthetic.sensor")
+          .flag("exact", &C::exact_mode,
+                "switch every effect off (depth and colour are the exact render); the keys below "
+                "then default to off")
+          .flag("depth_noise", &C::depth_noise, "Kinect v1 axial depth noise")
+          .flag("depth_quantization", &C::depth_quantization, "disparity quantisation of depth")
+          .number("min_range_m", &C::min_range_m, 0.0, 10.0, "m",
+                  "nearer depth is dropped; 0 disables the near gate")
+          .number("max_range_m", &C::max_range_m, 0.0, 100.0, "m",
+                  "farther depth is dropped; > min_range_m, or 0 to disable the far gate")
+          .number("max_incidence_deg", &C::max_incidence_deg, 10.0, 90.0, "deg",
+                  "depth at more grazing angles drops out; 90 disables")
+          .number("edge_band_px", &C::edge_band_px, 0, 10, "px",
+                  "dropout band at depth edges; 0 disables")
+          .number("edge_jump_fraction", &C::edge_jump_fraction, 0.001, 1.0, "",
+                  "depth jump (fraction of z) that makes an edge")
+          .number("ir_focal_px", &C::ir_focal_px, 100.0, 5000.0, "px",
+                  "focal length of the IR camera")
+          .number("baseline_m", &C::baseline_m, 0.01, 1.0, "m", "projector-camera baseline")
+          .number("disparity_subpixel", &C::disparity_subpixel, 1, 64, "",
+                  "disparity steps per pixel")
+          .number("color_noise_std", &C::color_noise_std, 0.0, 50.0, "grey levels",
+                  "colour noise; 0 disables")
+          .number("exposure_variation", &C::exposure_variation, 0.0, 0.9, "",
+                  "peak relative gain change; 0 disables")
+          .flag("motion_blur", &C::motion_blur, "average renders over the exposure time")
+          .number("exposure_time_s", &C::exposure_time_s, 0.0005, 0.1, "s",
+                  "shutter time of the motion blur, centred on the timestamp")
+          .number("blur_samples", &C::blur_samples, 2, 32, "",
+                  "renders averaged per blurred frame (odd: one is the frame's)");
+  return table;
+}
+
 SensorParams SensorParams::load(Config& config) {
-  const bool exact_mode = config.getBool("synthetic.sensor.exact", false);
-  SensorParams p = exact_mode ? exact() : SensorParams();
-  p.depth_noise = config.getBool("synthetic.sensor.depth_noise", p.depth_noise);
-  p.depth_quantization = config.getBool("synthetic.sensor.depth_quantization", p.depth_quantization);
-  p.min_range_m = config.getDouble("synthetic.sensor.min_range_m", p.min_range_m, 0.0, 10.0);
-  p.max_range_m = config.getDouble("synthetic.sensor.max_range_m", p.max_range_m, 0.0, 100.0);
+  SensorParams p;
+  schema().load(config, p);
+  if (p.exact_mode) {  // read again over the exact defaults
+    p = exact();
+    schema().load(config, p);
+  }
   if (p.max_range_m > 0.0 && p.max_range_m <= p.min_range_m) {
     throw ConfigError("synthetic.sensor.max_range_m = " + std::to_string(p.max_range_m) +
                       " must exceed synthetic.sensor.min_range_m = " +
                       std::to_string(p.min_range_m) + " (or be 0 to disable the far gate)");
   }
-  p.max_incidence_deg =
-      config.getDouble("synthetic.sensor.max_incidence_deg", p.max_incidence_deg, 10.0, 90.0);
-  p.edge_band_px = config.getInt("synthetic.sensor.edge_band_px", p.edge_band_px, 0, 10);
-  p.edge_jump_fraction =
-      config.getDouble("synthetic.sensor.edge_jump_fraction", p.edge_jump_fraction, 0.001, 1.0);
-  p.ir_focal_px = config.getDouble("synthetic.sensor.ir_focal_px", p.ir_focal_px, 100.0, 5000.0);
-  p.baseline_m = config.getDouble("synthetic.sensor.baseline_m", p.baseline_m, 0.01, 1.0);
-  p.disparity_subpixel =
-      config.getInt("synthetic.sensor.disparity_subpixel", p.disparity_subpixel, 1, 64);
-  p.color_noise_std =
-      config.getDouble("synthetic.sensor.color_noise_std", p.color_noise_std, 0.0, 50.0);
-  p.exposure_variation =
-      config.getDouble("synthetic.sensor.exposure_variation", p.exposure_variation, 0.0, 0.9);
-  p.motion_blur = config.getBool("synthetic.sensor.motion_blur", p.motion_blur);
-  p.exposure_time_s =
-      config.getDouble("synthetic.sensor.exposure_time_s", p.exposure_time_s, 0.0005, 0.1);
-  p.blur_samples = config.getInt("synthetic.sensor.blur_samples", p.blur_samples, 2, 32);
   return p;
 }
 

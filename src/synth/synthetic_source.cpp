@@ -13,17 +13,37 @@
 
 namespace slamd {
 
+namespace {
+
+const EnumNames<std::string> kTrajectoryNames = {
+    {"auto", "auto", "zigzag in the corridor, loop in corridor_loop, random elsewhere"},
+    {"zigzag", "zigzag", "walk along the corridor, swaying"},
+    {"random", "random", "smooth random motion"},
+    {"robot", "robot", "a low robot driving the path"},
+    {"loop", "loop", "walk around the ring corridor"},
+};
+
+}  // namespace
+
+const ConfigSchema<SyntheticConfig>& SyntheticConfig::schema() {
+  using C = SyntheticConfig;
+  static const auto table =
+      ConfigSchema<C>("synthetic")
+          .choice("trajectory", &C::trajectory, kTrajectoryNames, "camera path")
+          .number("frames", &C::frames, 0, 10'000'000, "frames",
+                  "0 = natural length of the trajectory")
+          .number("seed", &C::seed, 0, INT_MAX, "", "scene, motion and sensor noise seed")
+          .number("start_time_s", &C::start_time_s, 0.0, 4.0e9, "s", "first frame's timestamp")
+          .number("blackout_start_s", &C::blackout_start_s, 0.0, 1.0e6, "s",
+                  "from the first frame: frames from here on come out covered (black, no depth)")
+          .number("blackout_duration_s", &C::blackout_duration_s, 0.0, 1.0e6, "s",
+                  "length of the blackout; 0 = none");
+  return table;
+}
+
 SyntheticConfig SyntheticConfig::load(Config& config) {
   SyntheticConfig out;
-  out.trajectory = config.getChoice("synthetic.trajectory", out.trajectory,
-                                    {"auto", "zigzag", "random", "robot", "loop"});
-  out.frames = config.getInt("synthetic.frames", out.frames, 0, 10'000'000);
-  out.seed = static_cast<std::uint64_t>(config.getInt("synthetic.seed", 42, 0, INT_MAX));
-  out.start_time_s = config.getDouble("synthetic.start_time_s", out.start_time_s, 0.0, 4.0e9);
-  out.blackout_start_s =
-      config.getDouble("synthetic.blackout_start_s", out.blackout_start_s, 0.0, 1.0e6);
-  out.blackout_duration_s =
-      config.getDouble("synthetic.blackout_duration_s", out.blackout_duration_s, 0.0, 1.0e6);
+  schema().load(config, out);
   out.scene = synth::SceneParams::load(config);
   out.motion = synth::MotionParams::load(config);
   out.sensor = synth::SensorParams::load(config);

@@ -2,95 +2,133 @@
 
 namespace slamd {
 
-const char* frontEndName(FrontEndType type) {
-  switch (type) {
-    case FrontEndType::kOrb:
-      return "orb";
-    case FrontEndType::kSift:
-      return "sift";
-    case FrontEndType::kFovis:
-      return "fovis";
-  }
-  return "unknown";
+namespace {
+
+using C = TrackingConfig;
+
+const EnumNames<FrontEndType> kFrontEndNames = {
+    {FrontEndType::kOrb, "orb", "ORB features, Hamming matching"},
+    {FrontEndType::kSift, "sift", "SIFT features, L2 matching"},
+    {FrontEndType::kFovis, "fovis", "FAST corners with 9x9 patch matching, as FOVIS"},
+};
+
+const EnumNames<C::OutlierRejection> kOutlierRejectionNames = {
+    {C::OutlierRejection::kAuto, "auto", "clique for fovis (as FOVIS), RANSAC for orb and sift"},
+    {C::OutlierRejection::kRansac, "ransac", "RANSAC on the reprojection error"},
+    {C::OutlierRejection::kClique, "clique", "maximum clique of mutually consistent 3D distances"},
+};
+
+const EnumNames<C::Switch> kSwitchNames = {
+    {C::Switch::kAuto, "auto", "on for fovis only"},
+    {C::Switch::kOn, "on", ""},
+    {C::Switch::kOff, "off", ""},
+};
+
+}  // namespace
+
+const char* frontEndName(FrontEndType type) { return enumText(kFrontEndNames, type); }
+
+const ConfigSchema<TrackingConfig>& TrackingConfig::schema() {
+  static const auto table =
+      ConfigSchema<C>("tracking")
+          .choice("frontend", &C::frontend, kFrontEndNames, "feature front end")
+          .number("max_features", &C::max_features, 50, 10000, "", "features kept per frame")
+          .number("grid_cols", &C::grid_cols, 1, 64, "",
+                  "spatial buckets across; each bucket keeps at most max_features / (cols * "
+                  "rows) of its strongest features")
+          .number("grid_rows", &C::grid_rows, 1, 64, "", "spatial buckets down")
+          .number("orb_levels", &C::orb_levels, 1, 12, "",
+                  "ORB pyramid levels (scale 1.2); few levels halve extraction time and suffice "
+                  "for fr1/xyz-like motion")
+          .number("orb_fast_threshold", &C::orb_fast_threshold, 1, 100, "grey levels",
+                  "ORB FAST threshold (stronger corners localise better)")
+          .flag("subpixel", &C::subpixel, "refine level-0 ORB/FAST corners to sub-pixel")
+          .flag("patch_refinement", &C::patch_refinement,
+                "refine each inlier's position by aligning the reference image's 9x9 patch "
+                "(Lucas-Kanade, translation + brightness offset), as FOVIS does; then re-estimate")
+          .number("align_blur_sigma_px", &C::align_blur_sigma_px, 0.0, 5.0, "px",
+                  "Gaussian blur of the images used for patch refinement (0 = none); damps "
+                  "aliasing and sensor noise")
+          .flag("undistort", &C::undistort,
+                "undistort keypoints with the frame's plumb-bob coefficients before any geometry")
+          .number("min_depth_m", &C::min_depth_m, 0.05, 100.0, "m",
+                  "depth measurements below are ignored")
+          .number("max_depth_m", &C::max_depth_m, 0.05, 100.0, "m",
+                  "depth measurements above are ignored; > min_depth_m")
+          .number("match_ratio", &C::match_ratio, 0.3, 1.0, "", "Lowe ratio, best / second")
+          .number("max_descriptor_distance", &C::max_descriptor_distance, 1, 256, "bits",
+                  "largest Hamming distance accepted for ORB (SIFT uses L2 < 350, FOVIS its own "
+                  "SAD bound)")
+          .number("search_radius_px", &C::search_radius_px, 2, 200, "px",
+                  "radius of the projection-guided search around a keypoint's predicted position")
+          .number("refine_search_radius_px", &C::refine_search_radius_px, 0, 50, "px",
+                  "radius of the second guided search with the estimated pose (0 = off)")
+          .number("min_guided_matches", &C::min_guided_matches, 3, 10000, "",
+                  "fewer guided matches fall back to matching over the whole image")
+          .choice("outlier_rejection", &C::outlier_rejection, kOutlierRejectionNames,
+                  "how inliers are found before refinement")
+          .choice("rotation_prior", &C::rotation_prior, kSwitchNames,
+                  "predict the rotation by aligning 80x60 blurred images (FOVIS) instead of "
+                  "constant velocity")
+          .number("ransac_iterations", &C::ransac_iterations, 1, 100000, "",
+                  "upper bound on RANSAC hypotheses (fewer at a high inlier ratio, 99.9% "
+                  "confidence)")
+          .number("inlier_threshold_px", &C::inlier_threshold_px, 0.1, 50, "px",
+                  "reprojection error bound for inliers")
+          .number("min_inliers", &C::min_inliers, 3, 10000, "", "fewer inliers fail the frame")
+          .number("min_features", &C::min_features, 3, 10000, "",
+                  "fewer features with depth fail the frame (INSUFFICIENT_FEATURES)")
+          .number("max_iterations", &C::max_iterations, 1, 100, "", "Gauss-Newton/LM iterations")
+          .number("pixel_sigma_px", &C::pixel_sigma_px, 0.05, 20, "px",
+                  "keypoint noise at pyramid level 0 (scaled by the level's scale factor)")
+          .number("depth_sigma_coeff", &C::depth_sigma_coeff, 0.0, 1.0, "1/m",
+                  "depth noise sigma_z = coeff * z^2; 0 disables the depth residual")
+          .flag("estimate_noise_scale", &C::estimate_noise_scale,
+                "weigh reprojection and depth residuals by their estimated noise (median "
+                "residual) instead of pixel_sigma_px and depth_sigma_coeff as they are")
+          .number("huber_k", &C::huber_k, 0.1, 100, "sigmas", "Huber kernel width")
+          .number("joint_references", &C::joint_references, -1, 10, "keyframes",
+                  "refine the pose jointly against this many more recent keyframes (held fixed) "
+                  "after the keyframe; 0 = the keyframe alone; -1 = 2 for orb and sift, 0 for fovis")
+          .number("joint_max_matches", &C::joint_max_matches, 10, 10000, "",
+                  "matches used per extra reference in the joint refinement")
+          .number("fovis_levels", &C::fovis_levels, 1, 5, "", "FOVIS pyramid levels")
+          .number("fovis_fast_threshold", &C::fovis_fast_threshold, 5, 100, "grey levels",
+                  "initial FAST threshold, adapted each frame towards max_features")
+          .number("fovis_max_sad", &C::fovis_max_sad, 1, 20000, "",
+                  "largest sum of absolute differences of two 9x9 brightness-normalised patches "
+                  "accepted as a match")
+          .number("fovis_clique_tolerance_m", &C::fovis_clique_tolerance_m, 0.001, 1.0, "m",
+                  "two matches are consistent when their 3D distances differ by less than this "
+                  "plus both points' depth noise")
+          .number("keyframe_min_inliers", &C::keyframe_min_inliers, 3, 10000, "",
+                  "fewer inliers against the keyframe make the current frame a keyframe")
+          .number("keyframe_min_overlap", &C::keyframe_min_overlap, 0.0, 1.0, "fraction",
+                  "fraction of the keyframe's features with depth still tracked; below it the "
+                  "current frame becomes a keyframe")
+          .number("keyframe_max_translation_m", &C::keyframe_max_translation_m, 0.001, 100, "m",
+                  "farther from the keyframe makes a new keyframe")
+          .number("keyframe_max_rotation_deg", &C::keyframe_max_rotation_deg, 0.1, 180, "deg",
+                  "more rotation from the keyframe makes a new keyframe")
+          .number("keyframe_window", &C::keyframe_window, 1, 1000, "keyframes",
+                  "recent keyframes kept (about 3 MB each at 640x480); a due keyframe re-uses a "
+                  "recent one near the current pose if it tracks well (1 = never re-use)")
+          .number("max_predicted_frames", &C::max_predicted_frames, 0, 1000, "frames",
+                  "consecutive failed frames bridged by constant-velocity prediction before LOST")
+          .number("failure_sigma_scale", &C::failure_sigma_scale, 1.0, 1e6, "",
+                  "covariance inflation of a predicted (failed) frame relative to the last good "
+                  "frame's");
+  return table;
 }
 
 TrackingConfig TrackingConfig::load(Config& config) {
   TrackingConfig c;
-  const std::string frontend =
-      config.getChoice("tracking.frontend", "orb", {"orb", "sift", "fovis"});
-  c.frontend = frontend == "sift"    ? FrontEndType::kSift
-               : frontend == "fovis" ? FrontEndType::kFovis
-                                     : FrontEndType::kOrb;
-  const std::string rejection =
-      config.getChoice("tracking.outlier_rejection", "auto", {"auto", "ransac", "clique"});
-  c.outlier_rejection = rejection == "ransac"   ? OutlierRejection::kRansac
-                        : rejection == "clique" ? OutlierRejection::kClique
-                                                : OutlierRejection::kAuto;
-  const std::string prior =
-      config.getChoice("tracking.rotation_prior", "auto", {"auto", "on", "off"});
-  c.rotation_prior = prior == "on"    ? Switch::kOn
-                     : prior == "off" ? Switch::kOff
-                                      : Switch::kAuto;
-  c.max_features = config.getInt("tracking.max_features", c.max_features, 50, 10000);
-  c.grid_cols = config.getInt("tracking.grid_cols", c.grid_cols, 1, 64);
-  c.grid_rows = config.getInt("tracking.grid_rows", c.grid_rows, 1, 64);
-  c.orb_levels = config.getInt("tracking.orb_levels", c.orb_levels, 1, 12);
-  c.orb_fast_threshold =
-      config.getInt("tracking.orb_fast_threshold", c.orb_fast_threshold, 1, 100);
-  c.subpixel = config.getBool("tracking.subpixel", c.subpixel);
-  c.patch_refinement = config.getBool("tracking.patch_refinement", c.patch_refinement);
-  c.align_blur_sigma_px =
-      config.getDouble("tracking.align_blur_sigma_px", c.align_blur_sigma_px, 0.0, 5.0);
-  c.undistort = config.getBool("tracking.undistort", c.undistort);
-  c.min_depth_m = config.getDouble("tracking.min_depth_m", c.min_depth_m, 0.05, 100.0);
-  c.max_depth_m = config.getDouble("tracking.max_depth_m", c.max_depth_m, 0.05, 100.0);
+  schema().load(config, c);
   if (c.max_depth_m <= c.min_depth_m) {
     throw ConfigError("tracking.max_depth_m (" + std::to_string(c.max_depth_m) +
                       ") must be greater than tracking.min_depth_m (" +
                       std::to_string(c.min_depth_m) + ")");
   }
-  c.match_ratio = config.getDouble("tracking.match_ratio", c.match_ratio, 0.3, 1.0);
-  c.max_descriptor_distance =
-      config.getInt("tracking.max_descriptor_distance", c.max_descriptor_distance, 1, 256);
-  c.search_radius_px = config.getDouble("tracking.search_radius_px", c.search_radius_px, 2, 200);
-  c.refine_search_radius_px =
-      config.getDouble("tracking.refine_search_radius_px", c.refine_search_radius_px, 0, 50);
-  c.min_guided_matches =
-      config.getInt("tracking.min_guided_matches", c.min_guided_matches, 3, 10000);
-  c.ransac_iterations =
-      config.getInt("tracking.ransac_iterations", c.ransac_iterations, 1, 100000);
-  c.inlier_threshold_px =
-      config.getDouble("tracking.inlier_threshold_px", c.inlier_threshold_px, 0.1, 50);
-  c.min_inliers = config.getInt("tracking.min_inliers", c.min_inliers, 3, 10000);
-  c.min_features = config.getInt("tracking.min_features", c.min_features, 3, 10000);
-  c.max_iterations = config.getInt("tracking.max_iterations", c.max_iterations, 1, 100);
-  c.pixel_sigma_px = config.getDouble("tracking.pixel_sigma_px", c.pixel_sigma_px, 0.05, 20);
-  c.depth_sigma_coeff =
-      config.getDouble("tracking.depth_sigma_coeff", c.depth_sigma_coeff, 0.0, 1.0);
-  c.estimate_noise_scale = config.getBool("tracking.estimate_noise_scale", c.estimate_noise_scale);
-  c.huber_k = config.getDouble("tracking.huber_k", c.huber_k, 0.1, 100);
-  c.joint_references = config.getInt("tracking.joint_references", c.joint_references, -1, 10);
-  c.joint_max_matches =
-      config.getInt("tracking.joint_max_matches", c.joint_max_matches, 10, 10000);
-  c.fovis_levels = config.getInt("tracking.fovis_levels", c.fovis_levels, 1, 5);
-  c.fovis_fast_threshold =
-      config.getInt("tracking.fovis_fast_threshold", c.fovis_fast_threshold, 5, 100);
-  c.fovis_max_sad = config.getInt("tracking.fovis_max_sad", c.fovis_max_sad, 1, 20000);
-  c.fovis_clique_tolerance_m = config.getDouble("tracking.fovis_clique_tolerance_m",
-                                                c.fovis_clique_tolerance_m, 0.001, 1.0);
-  c.keyframe_min_inliers =
-      config.getInt("tracking.keyframe_min_inliers", c.keyframe_min_inliers, 3, 10000);
-  c.keyframe_min_overlap =
-      config.getDouble("tracking.keyframe_min_overlap", c.keyframe_min_overlap, 0.0, 1.0);
-  c.keyframe_max_translation_m = config.getDouble("tracking.keyframe_max_translation_m",
-                                                  c.keyframe_max_translation_m, 0.001, 100);
-  c.keyframe_max_rotation_deg = config.getDouble("tracking.keyframe_max_rotation_deg",
-                                                 c.keyframe_max_rotation_deg, 0.1, 180);
-  c.keyframe_window = config.getInt("tracking.keyframe_window", c.keyframe_window, 1, 1000);
-  c.max_predicted_frames =
-      config.getInt("tracking.max_predicted_frames", c.max_predicted_frames, 0, 1000);
-  c.failure_sigma_scale =
-      config.getDouble("tracking.failure_sigma_scale", c.failure_sigma_scale, 1.0, 1e6);
   return c;
 }
 

@@ -9,41 +9,19 @@
 #include <string>
 
 #include "fuzz_input.hpp"
-#include "slamd/app/daemon_config.hpp"
-#include "slamd/backend/backend_config.hpp"
+#include "slamd/app/config_reference.hpp"
 #include "slamd/capture/camera_config.hpp"
-#include "slamd/capture/depth_preprocessor.hpp"
-#include "slamd/capture/openni2_source.hpp"
-#include "slamd/capture/paced_source.hpp"
-#include "slamd/capture/tum_source.hpp"
 #include "slamd/common/config.hpp"
-#include "slamd/comms/channels.hpp"
-#include "slamd/comms/lcm_frame_publisher.hpp"
-#include "slamd/comms/lcm_frame_source.hpp"
-#include "slamd/filter/filter_config.hpp"
-#include "slamd/mapping/mapping_config.hpp"
 #include "slamd/synth/synthetic_source.hpp"
-#include "slamd/tracking/tracking_config.hpp"
 
 namespace {
 
 using namespace slamd;
 
 void loadEveryModule(Config& config) {
-  DaemonConfig::load(config);
-  ChannelConfig::load(config);
-  TrackingConfig::load(config);
-  FilterConfig::load(config);
-  MappingConfig::load(config);
-  BackendConfig::load(config);
-  LcmFramePublisherConfig::load(config);
-  LcmFrameSourceConfig::load(config);
-  TumSourceConfig::load(config);
-  OpenNi2Config::load(config);
-  PacingConfig::load(config);
-  DepthPreprocessorConfig::load(config);
+  loadEveryConfigArea(config);
   CameraConfig::load(config, 1000.0);
-  SyntheticConfig::load(config);
+  SyntheticConfig::load(config);  // with its check across the camera and synthetic areas
   config.unknownKeys();
   config.effectiveYaml();
 }

@@ -23,21 +23,25 @@
 #include <opencv2/core.hpp>
 
 #include "slamd/common/config.hpp"
+#include "slamd/common/config_schema.hpp"
 
 namespace slamd {
 
+/// Keys `capture.preprocess.*` (type, default, range, unit and doc of each: its row in
+/// depth_preprocessor.cpp, or `slamd --describe-config capture`).
 struct DepthPreprocessorConfig {
-  bool range_gate = true;           ///< capture.preprocess.range_gate
-  double min_depth_m = 0.3;         ///< capture.preprocess.min_depth_m, [0, 100]
-  double max_depth_m = 8.0;         ///< capture.preprocess.max_depth_m, (min, 100]
-  bool flying_pixels = true;        ///< capture.preprocess.flying_pixels
-  double jump_ratio = 0.05;         ///< capture.preprocess.flying_jump_ratio, (0, 1]
-  int min_support = 2;              ///< capture.preprocess.flying_min_support, 0..8
-  bool bilateral = false;           ///< capture.preprocess.bilateral
-  int bilateral_radius_px = 2;      ///< capture.preprocess.bilateral_radius_px, 1..7
-  double spatial_sigma_px = 1.5;    ///< capture.preprocess.bilateral_spatial_sigma_px, (0, 20]
-  double range_sigma_ratio = 0.01;  ///< capture.preprocess.bilateral_range_sigma_ratio, (0, 1]
+  bool range_gate = true;
+  double min_depth_m = 0.3;
+  double max_depth_m = 8.0;
+  bool flying_pixels = true;
+  double jump_ratio = 0.05;
+  int min_support = 2;
+  bool bilateral = false;
+  int bilateral_radius_px = 2;
+  double spatial_sigma_px = 1.5;
+  double range_sigma_ratio = 0.01;
 
+  static const ConfigSchema<DepthPreprocessorConfig>& schema();
   static DepthPreprocessorConfig load(Config& config);
   bool anyEnabled() const { return range_gate || flying_pixels || bilateral; }
 };

@@ -44,23 +44,26 @@
 
 namespace slamd {
 
+/// Keys `capture.openni2.*` and `capture.oni.*` (type, default, range, unit and doc of each: its
+/// row in openni2_config.cpp, or `slamd --describe-config capture`) and camera.*.
 struct OpenNi2Config {
-  CameraConfig camera;                  ///< camera.* (depth_scale comes from the pixel format)
-  bool intrinsics_from_device = false;  ///< capture.openni2.intrinsics: config|device
-  int width = 640;                      ///< capture.openni2.width, pixels, 1..4096
-  int height = 480;                     ///< capture.openni2.height, pixels, 1..4096
-  int fps = 30;                         ///< capture.openni2.fps, 1..120
-  bool registration = true;             ///< capture.openni2.registration (depth to colour)
-  bool sync = true;                     ///< capture.openni2.sync (depth/colour frame sync)
-  bool color = true;                    ///< capture.openni2.color (false: depth only)
-  double frame_timeout_s = 2.0;         ///< capture.openni2.frame_timeout_s, (0, 60]
-  double reconnect_initial_s = 0.5;     ///< capture.openni2.reconnect_initial_s, (0, 60]
-  double reconnect_max_s = 8.0;         ///< capture.openni2.reconnect_max_s, (0, 600]
-  bool oni_realtime = false;            ///< capture.oni.realtime
+  CameraConfig camera;  ///< depth_scale comes from the pixel format
+  bool intrinsics_from_device = false;
+  int width = 640;
+  int height = 480;
+  int fps = 30;
+  bool registration = true;
+  bool sync = true;
+  bool color = true;
+  double frame_timeout_s = 2.0;
+  double reconnect_initial_s = 0.5;
+  double reconnect_max_s = 8.0;
+  bool oni_realtime = false;
   /// Real-time playback speed (OpenNI's player), set from capture.pacing.speed when slamd's
   /// pacing is realtime (createFrameSource); 1 = as recorded.
   double oni_speed = 1.0;
 
+  static const ConfigSchema<OpenNi2Config>& schema();
   static OpenNi2Config load(Config& config);
 };
 

@@ -27,19 +27,21 @@
 
 #include "slamd/capture/frame_source.hpp"
 #include "slamd/common/config.hpp"
+#include "slamd/common/config_schema.hpp"
 
 namespace slamd {
 
 enum class PacingMode { kAsFastAsPossible, kRealTime, kFixedRate };
 
+/// Keys `capture.pacing.*` (type, default, range, unit and doc of each: its row in
+/// paced_source.cpp, or `slamd --describe-config capture`).
 struct PacingConfig {
-  PacingMode mode = PacingMode::kAsFastAsPossible;  ///< capture.pacing.mode: fastest|realtime|fixed
-  double speed = 1.0;      ///< capture.pacing.speed, real-time multiplier, (0, 100]
-  double rate_hz = 30.0;   ///< capture.pacing.rate_hz for fixed, (0, 1000]
-  /// capture.pacing.max_lag_s, (0, 60]: sources that must be read to advance drop frames read
-  /// later than this
+  PacingMode mode = PacingMode::kAsFastAsPossible;
+  double speed = 1.0;
+  double rate_hz = 30.0;
   double max_lag_s = 0.1;
 
+  static const ConfigSchema<PacingConfig>& schema();
   static PacingConfig load(Config& config);
 };
 

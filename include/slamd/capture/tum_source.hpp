@@ -29,13 +29,16 @@
 
 namespace slamd {
 
+/// Keys `capture.tum.*` (type, default, range, unit and doc of each: its row in tum_source.cpp,
+/// or `slamd --describe-config capture`) and camera.* (depth_scale default 5000).
 struct TumSourceConfig {
-  CameraConfig camera;             ///< camera.* (depth_scale default 5000)
-  double max_difference_s = 0.02;  ///< capture.tum.max_difference_s, (0, 1]
-  double time_offset_s = 0.0;      ///< capture.tum.time_offset_s added to depth times, [-10, 10]
-  std::string associations;        ///< capture.tum.associations: file (relative to DIR) or ""
-  std::string groundtruth = "groundtruth.txt";  ///< capture.tum.groundtruth ("" = none)
+  CameraConfig camera;
+  double max_difference_s = 0.02;
+  double time_offset_s = 0.0;
+  std::string associations;
+  std::string groundtruth = "groundtruth.txt";
 
+  static const ConfigSchema<TumSourceConfig>& schema();
   static TumSourceConfig load(Config& config);
 };
 

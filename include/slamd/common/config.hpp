@@ -29,6 +29,10 @@ class ConfigError : public std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
+/// The shortest text that reads back as the same double ("0.05", "1e-06"), as used values and
+/// error messages write numbers.
+std::string formatConfigNumber(double value);
+
 class Config {
  public:
   Config() = default;
@@ -59,6 +63,8 @@ class Config {
                                     const std::vector<double>& default_value,
                                     std::size_t required_length = 0);
 
+  /// Every key read so far (with or without a value in the file or overrides), sorted.
+  std::vector<std::string> usedKeys() const;
   /// Keys present in the file or overrides that no module read (probably misspelt).
   std::vector<std::string> unknownKeys() const;
   /// Every key read so far with the value used, as YAML grouped by section.

@@ -9,6 +9,7 @@
 #include <optional>
 #include <string>
 
+#include "slamd/common/config_schema.hpp"
 #include "slamd/common/rgbd_frame.hpp"
 #include "kinect/frame_msg_t.hpp"
 #include "slamd/rgbd_frame_t.hpp"
@@ -23,6 +24,9 @@ class FrameDecodeError : public std::runtime_error {
 enum class ColorEncoding { kRgb8, kBgr8, kJpeg, kPng };
 enum class DepthEncoding { kRawU16, kPngU16, kZlibU16 };
 
+/// The configuration texts of the encodings (capture.publish.color, capture.publish.depth).
+const EnumNames<ColorEncoding>& colorEncodingNames();
+const EnumNames<DepthEncoding>& depthEncodingNames();
 /// Parses "rgb8|bgr8|jpeg|png" and "raw|png|zlib"; throws std::invalid_argument otherwise.
 ColorEncoding parseColorEncoding(const std::string& text);
 DepthEncoding parseDepthEncoding(const std::string& text);

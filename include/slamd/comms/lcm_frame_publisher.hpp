@@ -31,6 +31,8 @@ struct LcmFramePublisherConfig {
   bool kinect_format = false;
   FrameEncodeOptions encode;
 
+  /// The `capture.publish.*` keys.
+  static const ConfigSchema<LcmFramePublisherConfig>& schema();
   static LcmFramePublisherConfig load(Config& config);
 };
 

@@ -44,26 +44,21 @@ namespace slamd {
 
 enum class LcmFrameFormat { kAuto, kRgbdFrame, kKinectFrame };
 
+/// Keys `capture.lcm.*` (type, default, range, unit and doc of each: its row in
+/// lcm_frame_source.cpp, or `slamd --describe-config capture`) and camera.*.
 struct LcmFrameSourceConfig {
   std::string url;  ///< capture.lcm.url, else lcm.url, else "" (LCM's default, $LCM_DEFAULT_URL)
-  LcmFrameFormat format = LcmFrameFormat::kAuto;  ///< capture.lcm.format: auto|rgbd|kinect
-  int queue_capacity = 4;                         ///< capture.lcm.queue_capacity, messages, 1..1000
-  double idle_end_s = 0.0;                        ///< capture.lcm.idle_end_s, 0 = never, [0, 3600]
-  /// capture.lcm.max_time_jump_s, (0, 86400]: a frame whose timestamp is further than this from
-  /// the stream's clock is rejected (StreamClock)
-  double max_time_jump_s = 1.0;
-  /// capture.lcm.reanchor_frames, 1..1000: rejected frames in a row, agreeing with each other,
-  /// after which the stream's clock is taken to have jumped for real and is re-anchored
+  LcmFrameFormat format = LcmFrameFormat::kAuto;
+  int queue_capacity = 4;
+  double idle_end_s = 0.0;
+  double max_time_jump_s = 1.0;  ///< see StreamClock
   int reanchor_frames = 5;
-  /// capture.lcm.max_rate_hz, [0, 1000], 0 = no limit: a frame stamped less than 0.8 / max_rate_hz
-  /// after the previous frame delivered is dropped before its images are decoded, and counted
-  /// (FrameSourceStats::frames_over_rate). The camera's own frame rate (30 for Kinect- and
-  /// Xtion-class cameras; set 60 for a 60 Hz mode, 0 to replay logs faster than recorded): it
-  /// admits the camera with its jitter and keeps extra valid frames (a second publisher, a flood)
-  /// from costing a decode and a tracking step each.
+  /// The camera's own frame rate: extra valid frames (a second publisher, a flood) cost no
+  /// decode and no tracking step.
   double max_rate_hz = 30.0;
-  CameraConfig camera;                            ///< camera.*, for kinect.frame_msg_t
+  CameraConfig camera;  ///< for kinect.frame_msg_t
 
+  static const ConfigSchema<LcmFrameSourceConfig>& schema();
   static LcmFrameSourceConfig load(Config& config);
 };
 

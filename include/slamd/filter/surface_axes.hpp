@@ -46,45 +46,32 @@
 
 #include "slamd/common/camera_intrinsics.hpp"
 #include "slamd/common/config.hpp"
+#include "slamd/common/config_schema.hpp"
 
 namespace slamd {
 
-/// Surface-axis detector options, keys `filter.axes.*`.
+/// Surface-axis detector options, keys `filter.axes.*` (type, default, range, unit and doc of
+/// each: its row in surface_axes.cpp, or `slamd --describe-config filter`).
 struct SurfaceAxesConfig {
-  /// `cell_px` (int, default 24, 6..160, pixels): side of the square cells a plane is fitted in.
   int cell_px = 24;
-  /// `sample_step_px` (int, default 2, 1..16, pixels): depth pixels used inside a cell.
   int sample_step_px = 2;
-  /// `min_cell_points` (int, default 40, 3..10000): a cell with fewer valid samples is skipped.
   int min_cell_points = 40;
-  /// `min_depth_m`, `max_depth_m` (double, defaults 0.4 / 3.5, 0.05..50, metres): depth range
-  /// used; far depth of a Kinect-class sensor is too noisy and coarsely quantised for normals.
-  double min_depth_m = 0.4;
+  double min_depth_m = 0.4;  ///< far Kinect-class depth is too noisy and coarse for normals
   double max_depth_m = 3.5;
-  /// `max_relative_residual` (double, default 0.015, 1e-5..1, dimensionless): a cell is planar
-  /// when the RMS residual of its plane fit in inverse depth is at most this fraction of its mean
-  /// inverse depth (about the relative depth error; Kinect-class noise is 0.3-0.6% at 2-3.5 m).
   double max_relative_residual = 0.015;
-  /// `inlier_angle_deg` (double, default 6, 0.1..45, degrees): a cell supports an axis when its
-  /// normal is within this angle of it (either sign).
   double inlier_angle_deg = 6.0;
-  /// `orthogonality_deg` (double, default 6, 0.1..45, degrees): the second and third axes must be
-  /// this close to perpendicular to the axes already found.
   double orthogonality_deg = 6.0;
-  /// `min_axis_cells` (int, default 12, 1..10000): fewer supporting cells = no axis.
   int min_axis_cells = 12;
-  /// `max_axes` (int, default 3, 1..3): axes reported at most.
   int max_axes = 3;
-  /// `min_sigma_deg` (double, default 2, 0.001..10, degrees): floor of each axis' standard
-  /// deviation (added in quadrature). It stands for what averaging cells cannot remove: the depth
-  /// calibration of a real sensor (a Kinect v1's planes bend by a degree or more towards the image
-  /// corners; TUM fr1/xyz's desk axis is inconsistent with its ground truth below about 2 degrees:
-  /// ATE +15% at 0.5, +4% at 1, -1.6% at 2). Rendered depth has none: config/synthetic.yaml
-  /// uses 0.1 (mean NIS 1.8 on the corridor).
+  /// Stands for what averaging cells cannot remove: the depth calibration of a real sensor (a
+  /// Kinect v1's planes bend by a degree or more towards the image corners). Rendered depth has
+  /// none: config/synthetic.yaml uses 0.1.
   double min_sigma_deg = 2.0;
 
-  /// Reads `<prefix>.*`; throws ConfigError naming the key when a value is out of range.
-  static SurfaceAxesConfig load(Config& config, const std::string& prefix = "filter.axes");
+  /// The `filter.axes.*` keys.
+  static const ConfigSchema<SurfaceAxesConfig>& schema();
+  /// Reads `filter.axes.*`; throws ConfigError naming the key when a value is out of range.
+  static SurfaceAxesConfig load(Config& config);
 };
 
 enum class SurfaceAxesStatus : std::int8_t {

@@ -27,14 +27,11 @@
 #include <string>
 #include <vector>
 
+#include "slamd/common/config_schema.hpp"
 #include "slamd/common/se3.hpp"
 #include "slamd/common/time.hpp"
 #include "slamd/common/trajectory.hpp"
 #include "slamd/synth/scene.hpp"
-
-namespace slamd {
-class Config;
-}
 
 namespace slamd::synth {
 
@@ -60,7 +57,8 @@ struct MotionParams {
   double max_angular_rate_radps = 0.6;  ///< peak rotation rate of the random motion
   double max_turn_rate_radps = 1.2;  ///< walkers and robots slow down so turns stay below this
 
-  /// Reads and validates "synthetic.walk_speed_mps", ... (ConfigError).
+  /// The motion's `synthetic.*` keys (rows in motion.cpp).
+  static const ConfigSchema<MotionParams>& schema();
   static MotionParams load(Config& config);
 };
 

@@ -21,11 +21,8 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
+#include "slamd/common/config_schema.hpp"
 #include "slamd/synth/texture.hpp"
-
-namespace slamd {
-class Config;
-}
 
 namespace slamd::synth {
 
@@ -60,7 +57,8 @@ struct SceneParams {
   double loop_width_m = 10.0;    ///< outer y extent of the ring corridor
   int wall_texture_px = 1024;    ///< wall texture side (power of two), 2 cm per texel
 
-  /// Reads and validates "synthetic.texture_density", "synthetic.doors", ... (ConfigError).
+  /// The scene's `synthetic.*` keys (rows in scene.cpp).
+  static const ConfigSchema<SceneParams>& schema();
   static SceneParams load(Config& config);
 };
 

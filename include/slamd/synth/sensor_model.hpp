@@ -33,11 +33,8 @@
 
 #include <opencv2/core.hpp>
 
+#include "slamd/common/config_schema.hpp"
 #include "slamd/synth/renderer.hpp"
-
-namespace slamd {
-class Config;
-}
 
 namespace slamd::synth {
 
@@ -57,9 +54,12 @@ struct SensorParams {
   bool motion_blur = false;        ///< average renders over the exposure time
   double exposure_time_s = 0.012;  ///< shutter time for the motion blur, centred on the timestamp
   int blur_samples = 5;            ///< renders averaged per blurred frame (odd: one is the frame's)
+  bool exact_mode = false;         ///< made by exact(): the defaults above are all off
 
   /// Every effect off: depth and colour are the exact render.
   static SensorParams exact();
+  /// The `synthetic.sensor.*` keys (rows in sensor_model.cpp).
+  static const ConfigSchema<SensorParams>& schema();
   /// Reads "synthetic.sensor.*" (synthetic.sensor.exact: true switches every effect off).
   static SensorParams load(Config& config);
 };

@@ -49,10 +49,9 @@ struct SyntheticConfig {
   int frames = 0;                   ///< 0 = natural length of the trajectory
   std::uint64_t seed = 42;
   double start_time_s = 1.6e9;
-  /// synthetic.blackout_start_s / synthetic.blackout_duration_s (seconds from the first frame,
-  /// default 0 / 0 = none): frames in [start, start + duration) come out covered, as if a hand
-  /// or a passer-by blocked the lens: black colour, no depth. Ground truth still lists them.
-  /// For testing tracking loss and relocalisation.
+  /// Frames in [start, start + duration) come out covered, as if a hand or a passer-by blocked
+  /// the lens: black colour, no depth (ground truth still lists them), for testing tracking loss
+  /// and relocalisation.
   double blackout_start_s = 0.0;
   double blackout_duration_s = 0.0;
   synth::SceneParams scene;
@@ -60,6 +59,8 @@ struct SyntheticConfig {
   synth::SensorParams sensor;
   CameraConfig camera;  ///< camera.* (depth_scale default 5000, the TUM factor)
 
+  /// The source's own `synthetic.*` keys (rows in synthetic_source.cpp).
+  static const ConfigSchema<SyntheticConfig>& schema();
   /// Reads and validates `synthetic.*` and `camera.*`; throws ConfigError.
   static SyntheticConfig load(Config& config);
 };
