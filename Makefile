@@ -7,6 +7,8 @@
 BUILD_DIR ?= build
 JOBS ?= 2
 CMAKE_ARGS ?=
+# WERROR=ON: compiler warnings fail the main build (CI sets it; see .ci/run).
+WERROR ?= OFF
 CTEST_ARGS ?=
 
 .PHONY: all deps build test unit-test run bench tsan asan ubsan asan-ubsan fuzz clean
@@ -17,7 +19,7 @@ deps:
 	@bash scripts/install-deps.sh
 
 $(BUILD_DIR)/CMakeCache.txt:
-	cmake -S . -B $(BUILD_DIR) -DCMAKE_BUILD_TYPE=Release $(CMAKE_ARGS)
+	cmake -S . -B $(BUILD_DIR) -DCMAKE_BUILD_TYPE=Release -DSLAMD_WERROR=$(WERROR) $(CMAKE_ARGS)
 
 build: deps $(BUILD_DIR)/CMakeCache.txt
 	cmake --build $(BUILD_DIR) -j$(JOBS)

@@ -4,6 +4,11 @@ add_library(slamd::warnings ALIAS slamd_warnings)
 target_compile_options(slamd_warnings INTERFACE
   -Wall -Wextra -Wpedantic -Wshadow -Wnon-virtual-dtor -Wold-style-cast -Wcast-align
   -Woverloaded-virtual -Wnull-dereference -Wdouble-promotion -Wformat=2 -Wimplicit-fallthrough)
+# CI builds with -DSLAMD_WERROR=ON (`make test WERROR=ON` in .ci/run): a warning fails the build.
+option(SLAMD_WERROR "Treat compiler warnings in slamd's own code as errors" OFF)
+if(SLAMD_WERROR)
+  target_compile_options(slamd_warnings INTERFACE -Werror)
+endif()
 
 # Sanitizers apply to everything built in this tree (libraries, tests, programs) so that a
 # sanitized test never links an unsanitized slamd library.

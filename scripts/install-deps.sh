@@ -7,7 +7,7 @@ set -euo pipefail
 
 PACKAGES=(
   # toolchain
-  build-essential cmake pkg-config ccache git
+  build-essential cmake pkg-config ccache git clang-format
   # libraries (the project's dependency list)
   liblcm-dev liblcm-bin libglib2.0-dev libeigen3-dev libopencv-dev liboctomap-dev
   libopenni2-dev libsuitesparse-dev zlib1g-dev
