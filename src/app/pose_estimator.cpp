@@ -15,6 +15,7 @@ EstimatedPacket PoseEstimator::process(TrackedPacket packet) {
   EstimatedPacket out;
   out.frame = std::move(packet.frame);
   out.odometry = std::move(packet.odometry);
+  out.reset_epoch = packet.reset_epoch;
   out.pose = last_pose_;
   if (!out.frame || !out.odometry) return out;  // heartbeat
 

@@ -3,7 +3,12 @@
 // frame it came from; a packet without a frame is a heartbeat, sent by the capture thread when no
 // frame arrived for a while (paused, waiting for a live source) so that downstream stages still
 // wake up to serve commands such as SAVE_MAP.
+//
+// reset_epoch: the number of RESET commands issued before the packet was captured. It travels
+// with the packet through every stage, which resets when it first sees a newer epoch (see
+// stage_steps.hpp).
 
+#include <cstdint>
 #include <optional>
 
 #include "slamd/common/pose_estimate.hpp"
@@ -17,6 +22,7 @@ namespace slamd {
 /// capture -> tracking
 struct CapturePacket {
   RgbdFramePtr frame;  ///< null: heartbeat
+  std::uint64_t reset_epoch = 0;
   bool isHeartbeat() const { return !frame; }
 };
 
@@ -28,6 +34,7 @@ struct TrackedPacket {
   /// tracking; joined to the packet by the filter thread (empty when that thread is off or its
   /// result was late).
   std::optional<VanishingPoint> vanishing_point;
+  std::uint64_t reset_epoch = 0;
   bool isHeartbeat() const { return !frame; }
 };
 
@@ -49,6 +56,7 @@ struct EstimatedPacket {
   std::optional<OdometryResult> odometry;
   PoseEstimate pose;  ///< the pose slamd publishes for this frame
   std::optional<VanishingPointReport> vanishing_point;
+  std::uint64_t reset_epoch = 0;
   bool isHeartbeat() const { return !frame; }
 };
 

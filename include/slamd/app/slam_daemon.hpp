@@ -10,9 +10,14 @@
 //   reportConfig(config, "slamd");
 //   return daemon.run(signals);                 // exit code
 //
-// Threads: capture, tracking, filter, publish and mapping belong to the pipeline; the LCM bus has
-// its own receive thread (commands only: it pushes them into a queue); the calling thread runs
-// the control loop (commands, 1 Hz status) and, after the pipeline has stopped, writes outputs.
+// Structure: each stage is a step class (stage_steps.hpp: capture, tracking, vanishing points,
+// filter, publish, mapping, back end) with no threads inside; slam_daemon.cpp builds the steps and
+// wires them in one table (stage, input, edge capacity and policy, thread niceness).
+//
+// Threads: one per stage, owned by the pipeline; the LCM bus has its own receive thread (commands
+// only: it pushes them into a queue); the calling thread runs the control loop (commands, 1 Hz
+// status) and, after the pipeline has stopped, writes outputs. RESET travels through the queues
+// with the frames, so every stage resets at the same point of the stream.
 
 #include <functional>
 #include <memory>

@@ -1,0 +1,400 @@
+#pragma once
+// The daemon's stages as steps: one class per pipeline stage, all of the same small shape
+//
+//   process(packet) -> what the stage passes on (nothing for a sink)
+//   reset()         -> forget the state (the RESET command)
+//   stats()         -> what the stage reports in the status message and the exit summary
+//
+// with no threads and no LCM inside, so that a test can drive a whole chain by hand. The daemon
+// (slam_daemon.cpp) gives each step a thread and connects them with the Pipeline's queues; what a
+// step publishes goes through DaemonPublisher (LCM in the daemon, a recorder in tests).
+//
+// RESET travels with the data. The control thread calls CaptureStep::reset(), which starts a new
+// reset epoch; every packet carries the epoch it was captured in (CaptureStep stamps it, every
+// step copies it to what it passes on). A step resets when the first packet of a newer epoch
+// reaches it, before processing that packet. The pipeline's edges keep order, so every packet
+// captured before the RESET reaches a step before that step's reset (and is processed, or dropped
+// by a drop-oldest edge like any other frame), never after it. Because the epoch rides on every
+// packet, frames and heartbeats alike, an edge that drops packets cannot drop the reset: the next
+// packet that gets through carries it. A packet of an older epoch arriving after a reset (which
+// FIFO edges never deliver) is refused and counted, never processed.
+//
+// Corrections from the back end travel beside the stream, so they carry the back end's epoch
+// too: a correction computed before a reset is dropped, one computed after it waits until the
+// receiving step has reset as well.
+
+#include <atomic>
+#include <chrono>
+#include <cstdint>
+#include <deque>
+#include <functional>
+#include <optional>
+#include <sstream>
+#include <string>
+#include <unordered_map>
+
+#include "slamd/app/backend_stage.hpp"
+#include "slamd/app/packets.hpp"
+#include "slamd/app/pose_estimator.hpp"
+#include "slamd/capture/frame_source.hpp"
+#include "slamd/common/latency_histogram.hpp"
+#include "slamd/common/trajectory.hpp"
+#include "slamd/mapping/mapper.hpp"
+#include "slamd/pipeline/pipeline.hpp"
+#include "slamd/pipeline/spsc_queue.hpp"
+#include "slamd/pipeline/wake_signal.hpp"
+#include "slamd/tracking/visual_odometry.hpp"
+
+namespace slamd {
+
+/// Everything the steps publish to the rest of the robot (LCM in the daemon). Called from the
+/// steps' threads: implementations must be thread-safe.
+class DaemonPublisher {
+ public:
+  virtual ~DaemonPublisher() = default;
+  /// The published pose (slamd and bot_core pose channels).
+  virtual void publishPose(const PoseEstimate& pose) = 0;
+  virtual void publishOdometry(const OdometryResult& odometry) = 0;
+  virtual void publishVanishingPoint(Utime utime, const VanishingPointReport& report) = 0;
+  virtual void publishKeyframes(const KeyframeTrajectory& trajectory) = 0;
+  virtual void publishMapUpdate(const MapUpdate& update) = 0;
+  virtual void publishFullMap(const FullMap& map) = 0;
+};
+
+/// One packet as a step saw it, for tests (see StepBase::setTrace).
+struct StepTraceEntry {
+  Utime utime = -1;              ///< the frame's capture time; -1 for a heartbeat
+  std::uint64_t reset_epoch = 0;  ///< the packet's epoch
+  std::uint64_t resets = 0;       ///< resets the step had done when it processed the packet
+};
+
+/// The reset-epoch bookkeeping every step downstream of capture shares.
+class StepBase {
+ public:
+  virtual ~StepBase() = default;
+  virtual void reset() = 0;
+
+  /// Epoch of the packets the step processes now, and how many resets it did.
+  std::uint64_t resetEpoch() const { return epoch_; }
+  std::uint64_t resets() const { return resets_; }
+  /// Packets refused because they were captured before the step's last reset.
+  std::uint64_t stalePackets() const { return stale_; }
+  /// Called for every packet the step processes, after the reset it caused if any (tests).
+  void setTrace(std::function<void(const StepTraceEntry&)> trace) { trace_ = std::move(trace); }
+
+ protected:
+  /// Resets the step when `epoch` is newer than its own. Returns false for a stale packet (older
+  /// epoch), which the caller must not process.
+  bool enter(std::uint64_t epoch, const RgbdFramePtr& frame);
+
+ private:
+  std::uint64_t epoch_ = 0;
+  std::uint64_t resets_ = 0;
+  std::uint64_t stale_ = 0;
+  std::function<void(const StepTraceEntry&)> trace_;
+};
+
+/// Items of a side queue (back-end corrections) taken in the receiving step's reset epoch:
+/// older ones are dropped, newer ones are kept until the step has reset too.
+template <typename T>
+class EpochInbox {
+ public:
+  explicit EpochInbox(SpscQueue<T>* queue) : queue_(queue) {}
+
+  /// Passes every waiting item of `epoch` to `take`, oldest first.
+  template <typename Take>
+  void take(std::uint64_t epoch, Take&& take) {
+    while (!ahead_.empty() && ahead_.front().reset_epoch <= epoch) {
+      if (ahead_.front().reset_epoch == epoch) take(std::move(ahead_.front()));
+      ahead_.pop_front();
+    }
+    if (queue_ == nullptr) return;
+    while (auto item = queue_->tryPop()) {
+      if (item->reset_epoch < epoch) continue;  // computed before this step's reset
+      if (item->reset_epoch > epoch || !ahead_.empty()) {
+        ahead_.push_back(std::move(*item));
+      } else {
+        take(std::move(*item));
+      }
+    }
+  }
+
+  void clear() { ahead_.clear(); }
+
+ private:
+  SpscQueue<T>* queue_;
+  std::deque<T> ahead_;
+};
+
+// --- capture ---------------------------------------------------------------------------------
+
+struct CaptureStepStats {
+  std::uint64_t frames_dropped_paused = 0;  ///< live frames read and thrown away while paused
+  std::uint64_t reset_epoch = 0;
+};
+
+/// Reads the source; emits a frame, or a heartbeat when none came for a heartbeat period (paused,
+/// a live source that went quiet) so that downstream stages still serve their requests.
+/// pause/resume/reset/stats may be called from any thread (the control loop).
+class CaptureStep {
+ public:
+  /// `republish` (may be empty) is given every captured frame (daemon.publish_frames).
+  CaptureStep(FrameSource& source, std::int64_t heartbeat_period_ns,
+              std::function<void(const RgbdFrame&)> republish);
+
+  SourceStep<CapturePacket> process();
+
+  /// Starts a new reset epoch: the next packet carries it, and each stage resets on it.
+  void reset() { reset_epoch_.fetch_add(1, std::memory_order_acq_rel); }
+  void pause() { paused_.store(true, std::memory_order_release); }
+  /// Ends a pause (also on shutdown, so that a paused recording does not hold the drain up).
+  void resume();
+  bool paused() const { return paused_.load(std::memory_order_acquire); }
+  CaptureStepStats stats() const;
+
+ private:
+  SourceStep<CapturePacket> emit(RgbdFramePtr frame);
+
+  FrameSource& source_;
+  const bool live_;
+  const std::int64_t heartbeat_period_ns_;
+  std::function<void(const RgbdFrame&)> republish_;
+  std::int64_t last_emit_ns_;
+  std::atomic<bool> paused_{false};
+  WakeSignal resume_signal_;
+  std::atomic<std::uint64_t> frames_dropped_paused_{0};
+  std::atomic<std::uint64_t> reset_epoch_{0};
+};
+
+// --- tracking --------------------------------------------------------------------------------
+
+/// Visual odometry on every frame.
+class TrackingStep : public StepBase {
+ public:
+  explicit TrackingStep(const TrackingConfig& config) : odometry_(config) {}
+
+  std::optional<TrackedPacket> process(CapturePacket packet);
+  void reset() override { odometry_.reset(); }
+  /// The latest frame's tracking state (any thread).
+  TrackingState stats() const {
+    return static_cast<TrackingState>(tracking_state_.load(std::memory_order_relaxed));
+  }
+
+ private:
+  VisualOdometry odometry_;
+  std::atomic<int> tracking_state_{static_cast<int>(TrackingState::kNotInitialized)};
+};
+
+// --- vanishing points (parallel to tracking) ---------------------------------------------------
+
+/// Vanishing-point step (producer) -> filter step (consumer), in frame order.
+struct VanishingPointChannel {
+  SpscQueue<VanishingPointPacket> queue{256};
+  WakeSignal ready;
+  std::atomic<std::uint64_t> late{0};        ///< detections the filter gave up waiting for
+  std::atomic<std::uint64_t> overflowed{0};  ///< detections that found the queue full
+};
+
+/// Detects each frame's vanishing point in parallel with tracking; the filter step joins it to
+/// the tracked frame by capture time.
+class VanishingPointStep : public StepBase {
+ public:
+  VanishingPointStep(const FilterConfig& config, VanishingPointChannel& channel)
+      : config_(config), channel_(channel) {}
+
+  void process(CapturePacket packet);
+  /// The detector keeps nothing from one frame to the next: nothing to forget.
+  void reset() override {}
+  /// Detections lost: late at the filter or overflowed (any thread).
+  std::uint64_t stats() const {
+    return channel_.late.load(std::memory_order_relaxed) +
+           channel_.overflowed.load(std::memory_order_relaxed);
+  }
+
+ private:
+  FilterConfig config_;
+  VanishingPointChannel& channel_;
+  std::optional<VanishingPointDetector> detector_;  ///< created at the first frame (intrinsics)
+};
+
+// --- filter ----------------------------------------------------------------------------------
+
+/// The pose filter (PoseEstimator), fed the vanishing point of each frame when the vanishing-
+/// point step runs.
+class FilterStep : public StepBase {
+ public:
+  /// `vanishing_points`: null when the filter detects them itself (or not at all);
+  /// `vanishing_point_wait`: how long to wait for a frame's detection.
+  FilterStep(const FilterConfig& config, VanishingPointChannel* vanishing_points,
+             std::chrono::microseconds vanishing_point_wait);
+
+  std::optional<EstimatedPacket> process(TrackedPacket packet);
+  void reset() override { estimator_.reset(); }
+
+ private:
+  std::optional<VanishingPoint> takeVanishingPoint(Utime utime);
+
+  PoseEstimator estimator_;
+  VanishingPointChannel* vanishing_points_;
+  std::chrono::microseconds vanishing_point_wait_;
+  std::optional<VanishingPointPacket> held_;  ///< a detection of a later frame
+};
+
+// --- publish ---------------------------------------------------------------------------------
+
+/// The back end's correction as the publish step needs it.
+struct PoseCorrection {
+  SE3 T_world_uncorrected = SE3::Identity();
+  bool relocalized = false;  ///< mark the next published pose TRACKING_RELOCALIZED
+  std::uint64_t reset_epoch = 0;
+};
+
+/// Published poses by tracking state, and the current loss. Written by the publish step; the
+/// atomics may be read from any thread (status), the rest after the publish thread joined.
+struct TrackingTally {
+  std::atomic<std::uint64_t> tracked{0};  ///< measured: OK or RELOCALIZED
+  std::atomic<std::uint64_t> predicted{0};
+  std::atomic<std::uint64_t> lost{0};
+  std::atomic<std::uint64_t> not_initialized{0};
+  /// Frame time of the first pose of the current loss (predicted or lost), -1 while tracking.
+  std::atomic<Utime> loss_start_utime{-1};
+  std::atomic<Utime> latest_utime{0};
+  std::atomic<std::uint64_t> loss_frames{0};  ///< poses in the current loss
+  double longest_loss_s = 0.0;
+  TrackingState last_state = TrackingState::kNotInitialized;
+  // Capture gaps (a camera that stopped delivering and came back): frames more than
+  // kCaptureGapS apart in capture time, and how long after the first frame back tracking
+  // measured a pose again.
+  static constexpr double kCaptureGapS = 0.5;
+  std::uint64_t capture_gaps = 0;
+  double longest_capture_gap_s = 0.0;
+  double longest_resume_s = 0.0;
+  Utime previous_utime = -1;
+  Utime gap_return_utime = -1;  ///< first frame after a gap, until a pose is measured
+
+  void record(TrackingState state, Utime utime);
+  /// "tracking lost for 1.2 s (36 frames)" during a loss, else empty.
+  std::string lossNote() const;
+};
+
+/// Applies the back end's correction to each filtered pose and publishes it (pose, odometry,
+/// vanishing point); keeps the published trajectory and the capture-to-pose latency.
+class PublishStep : public StepBase {
+ public:
+  PublishStep(DaemonPublisher& publisher, std::string world_frame, std::string camera_frame,
+              SpscQueue<PoseCorrection>* corrections);
+
+  void process(EstimatedPacket packet);
+  void reset() override;
+  const TrackingTally& stats() const { return tally_; }
+  /// Capture-to-publication latency (any thread).
+  const LatencyHistogram& endToEnd() const { return end_to_end_; }
+  /// Published poses that are estimates (not lost); read after the publish thread joined.
+  Trajectory& trajectory() { return trajectory_; }
+
+ private:
+  DaemonPublisher& publisher_;
+  std::string world_frame_;
+  std::string camera_frame_;
+  EpochInbox<PoseCorrection> corrections_;
+  SE3 correction_ = SE3::Identity();
+  bool corrected_ = false;
+  bool relocalized_ = false;
+  TrackingTally tally_;
+  LatencyHistogram end_to_end_;
+  Trajectory trajectory_;
+};
+
+// --- mapping ---------------------------------------------------------------------------------
+
+/// A request from the control loop to the mapping step, which owns the map while running.
+struct MapRequest {
+  enum class Kind { kSave, kPublish };
+  Kind kind = Kind::kSave;
+  std::string path;  ///< kSave: .bt or .ot
+};
+
+/// A back-end correction as the mapping step receives it.
+struct MapCorrection {
+  BackendCorrection correction;
+  std::uint64_t reset_epoch = 0;
+};
+
+struct MappingStepStats {
+  std::int64_t leaf_voxels = 0;
+  std::int64_t occupied_voxels = 0;  ///< counted once a second
+};
+
+/// Integrates each tracked frame (or keyframe) into the map at its corrected pose, rebuilds the
+/// map when the back end moves keyframes, serves SAVE_MAP / PUBLISH_MAP and publishes the map.
+class MappingStep : public StepBase {
+ public:
+  MappingStep(Mapper& mapper, const MappingConfig& config, DaemonPublisher& publisher,
+              SpscQueue<MapCorrection>* corrections, SpscQueue<MapRequest>* requests);
+
+  /// Throws when a frame could not be mapped (the pipeline counts it against this stage).
+  void process(const EstimatedPacket& packet);
+  void reset() override;
+  /// Serves the waiting map requests (also called by the control thread after the stop).
+  void serveRequests();
+  MappingStepStats stats() const;
+
+ private:
+  void applyCorrections();
+  void publishOutputs(const MapperOutputs& outputs);
+
+  Mapper& mapper_;
+  double resolution_m_;
+  bool keyframes_only_;
+  DaemonPublisher& publisher_;
+  EpochInbox<MapCorrection> corrections_;
+  SpscQueue<MapRequest>* requests_;
+  std::int64_t next_occupancy_count_ns_ = 0;
+  /// The back end's correction: uncorrected (filter) world -> corrected world.
+  SE3 T_world_uncorrected_ = SE3::Identity();
+  /// Pose each kept keyframe cloud is in the map at (corrected world).
+  std::unordered_map<std::int64_t, SE3> keyframe_map_poses_;
+  bool snapshot_failing_ = false;  ///< the last periodic snapshot failed
+  std::atomic<std::int64_t> leaf_voxels_{0};
+  std::atomic<std::int64_t> occupied_voxels_{0};
+};
+
+/// Largest distance a keyframe moves between two sets of poses: translation plus the rotation
+/// angle times a 2 m lever arm (a point 2 m in front of the camera), metres.
+double largestKeyframeShiftM(const std::unordered_map<std::int64_t, SE3>& before,
+                             const std::vector<std::pair<std::int64_t, SE3>>& after);
+
+// --- back end --------------------------------------------------------------------------------
+
+struct BackendStepStats {
+  std::int32_t keyframes = 0;
+  std::int32_t loops = 0;
+  std::int32_t relocalizations = 0;
+};
+
+/// Runs the back end (BackendStage) on every filtered frame; hands each correction to the
+/// publish and mapping steps and publishes the optimised keyframes.
+class BackendStep : public StepBase {
+ public:
+  /// `map_corrections`: null when mapping is off.
+  BackendStep(BackendStage& backend, std::string world_frame, DaemonPublisher& publisher,
+              SpscQueue<PoseCorrection>* pose_corrections,
+              SpscQueue<MapCorrection>* map_corrections);
+
+  void process(const EstimatedPacket& packet);
+  void reset() override { backend_.reset(); }
+  /// Counts for the status message (any thread).
+  BackendStepStats stats() const;
+
+ private:
+  BackendStage& backend_;
+  std::string world_frame_;
+  DaemonPublisher& publisher_;
+  SpscQueue<PoseCorrection>* pose_corrections_;
+  SpscQueue<MapCorrection>* map_corrections_;
+  std::atomic<std::int32_t> keyframes_{0};
+  std::atomic<std::int32_t> loops_{0};
+  std::atomic<std::int32_t> relocalizations_{0};
+};
+
+}  // namespace slamd

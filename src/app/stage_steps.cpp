@@ -1,0 +1,408 @@
+#include "slamd/app/stage_steps.hpp"
+
+#include <algorithm>
+#include <stdexcept>
+
+#include "slamd/common/log.hpp"
+
+namespace slamd {
+
+namespace {
+constexpr const char* kLog = "slamd";
+}  // namespace
+
+bool StepBase::enter(std::uint64_t epoch, const RgbdFramePtr& frame) {
+  if (epoch < epoch_) {
+    ++stale_;
+    return false;
+  }
+  if (epoch > epoch_) {
+    reset();
+    epoch_ = epoch;
+    ++resets_;
+  }
+  if (trace_) trace_(StepTraceEntry{frame ? frame->utime : -1, epoch, resets_});
+  return true;
+}
+
+// --- capture ---------------------------------------------------------------------------------
+
+CaptureStep::CaptureStep(FrameSource& source, std::int64_t heartbeat_period_ns,
+                         std::function<void(const RgbdFrame&)> republish)
+    : source_(source),
+      live_(source.isLive()),
+      heartbeat_period_ns_(heartbeat_period_ns),
+      republish_(std::move(republish)),
+      last_emit_ns_(steadyNowNs()) {}
+
+void CaptureStep::resume() {
+  paused_.store(false, std::memory_order_release);
+  resume_signal_.notify();
+}
+
+CaptureStepStats CaptureStep::stats() const {
+  return CaptureStepStats{frames_dropped_paused_.load(std::memory_order_relaxed),
+                          reset_epoch_.load(std::memory_order_acquire)};
+}
+
+SourceStep<CapturePacket> CaptureStep::emit(RgbdFramePtr frame) {
+  last_emit_ns_ = steadyNowNs();
+  return SourceStep<CapturePacket>::of(
+      CapturePacket{std::move(frame), reset_epoch_.load(std::memory_order_acquire)});
+}
+
+SourceStep<CapturePacket> CaptureStep::process() {
+  if (paused() && !live_) {
+    // A recording simply waits; a live source keeps being read (below) so that resuming
+    // continues from the present, not from a stale buffered frame.
+    const auto seen = resume_signal_.epoch();
+    if (paused() && steadyNowNs() - last_emit_ns_ < heartbeat_period_ns_) {
+      resume_signal_.waitFor(seen, std::chrono::steady_clock::now() +
+                                       std::chrono::nanoseconds(heartbeat_period_ns_));
+      return SourceStep<CapturePacket>::idle();
+    }
+    return emit(nullptr);
+  }
+  FrameRead read = source_.next(std::chrono::milliseconds(100));
+  if (read.status == FrameRead::Status::kEndOfStream) return SourceStep<CapturePacket>::end();
+  if (read.status == FrameRead::Status::kFrame && paused()) {
+    frames_dropped_paused_.fetch_add(1, std::memory_order_relaxed);
+  } else if (read.status == FrameRead::Status::kFrame) {
+    auto frame = std::make_shared<RgbdFrame>(*read.frame);  // shallow: images are shared
+    if (frame->received_steady_ns == 0) frame->received_steady_ns = steadyNowNs();
+    ensureGray(*frame);
+    if (republish_) republish_(*frame);
+    return emit(std::move(frame));
+  }
+  if (steadyNowNs() - last_emit_ns_ >= heartbeat_period_ns_) return emit(nullptr);
+  return SourceStep<CapturePacket>::idle();
+}
+
+// --- tracking --------------------------------------------------------------------------------
+
+std::optional<TrackedPacket> TrackingStep::process(CapturePacket packet) {
+  if (!enter(packet.reset_epoch, packet.frame)) return std::nullopt;
+  TrackedPacket out;
+  out.frame = std::move(packet.frame);
+  out.reset_epoch = packet.reset_epoch;
+  if (out.frame) {
+    out.odometry = odometry_.processFrame(out.frame);
+    tracking_state_.store(static_cast<int>(out.odometry->tracking_state),
+                          std::memory_order_relaxed);
+  }
+  return out;
+}
+
+// --- vanishing points ------------------------------------------------------------------------
+
+void VanishingPointStep::process(CapturePacket packet) {
+  if (!enter(packet.reset_epoch, packet.frame) || !packet.frame) return;
+  if (!detector_) detector_.emplace(config_, packet.frame->intrinsics);
+  VanishingPointPacket out{packet.frame->utime, detector_->detect(packet.frame->gray)};
+  if (!channel_.queue.tryPush(std::move(out))) {
+    channel_.overflowed.fetch_add(1, std::memory_order_relaxed);
+  }
+  channel_.ready.notify();
+}
+
+// --- filter ----------------------------------------------------------------------------------
+
+FilterStep::FilterStep(const FilterConfig& config, VanishingPointChannel* vanishing_points,
+                       std::chrono::microseconds vanishing_point_wait)
+    : estimator_(config, vanishing_points ? VanishingPointSource::kPrecomputed
+                                          : VanishingPointSource::kDetectHere),
+      vanishing_points_(vanishing_points),
+      vanishing_point_wait_(vanishing_point_wait) {}
+
+std::optional<EstimatedPacket> FilterStep::process(TrackedPacket packet) {
+  if (!enter(packet.reset_epoch, packet.frame)) return std::nullopt;
+  if (vanishing_points_ && packet.frame) {
+    packet.vanishing_point = takeVanishingPoint(packet.frame->utime);
+  }
+  return estimator_.process(std::move(packet));
+}
+
+std::optional<VanishingPoint> FilterStep::takeVanishingPoint(Utime utime) {
+  VanishingPointChannel& channel = *vanishing_points_;
+  const auto deadline = std::chrono::steady_clock::now() + vanishing_point_wait_;
+  while (true) {
+    const auto seen = channel.ready.epoch();
+    if (!held_) held_ = channel.queue.tryPop();
+    // Detections of frames tracking skipped are passed over.
+    while (held_ && held_->utime < utime) held_ = channel.queue.tryPop();
+    if (held_ && held_->utime == utime) {
+      std::optional<VanishingPoint> detection = std::move(held_->detection);
+      held_.reset();
+      return detection;
+    }
+    if (held_) break;  // the next detection is of a later frame: this frame's was dropped
+    if (!channel.ready.waitFor(seen, deadline)) break;
+  }
+  channel.late.fetch_add(1, std::memory_order_relaxed);
+  return std::nullopt;
+}
+
+// --- publish ---------------------------------------------------------------------------------
+
+void TrackingTally::record(TrackingState state, Utime utime) {
+  last_state = state;
+  latest_utime.store(utime, std::memory_order_relaxed);
+  const bool measured = state == TrackingState::kOk || state == TrackingState::kRelocalized;
+  const double since_previous_s =
+      previous_utime >= 0 ? utimeToSeconds(utime - previous_utime) : 0.0;
+  if (since_previous_s > kCaptureGapS) {
+    ++capture_gaps;
+    longest_capture_gap_s = std::max(longest_capture_gap_s, since_previous_s);
+    gap_return_utime = utime;
+  }
+  previous_utime = utime;
+  if (gap_return_utime >= 0 && measured) {
+    longest_resume_s = std::max(longest_resume_s, utimeToSeconds(utime - gap_return_utime));
+    gap_return_utime = -1;
+  }
+  const bool losing = state == TrackingState::kPredicted || state == TrackingState::kLost;
+  (measured                               ? tracked
+   : state == TrackingState::kPredicted   ? predicted
+   : state == TrackingState::kLost        ? lost
+                                          : not_initialized)
+      .fetch_add(1, std::memory_order_relaxed);
+  const Utime start = loss_start_utime.load(std::memory_order_relaxed);
+  if (losing) {
+    if (start < 0) loss_start_utime.store(utime, std::memory_order_relaxed);
+    loss_frames.fetch_add(1, std::memory_order_relaxed);
+    longest_loss_s = std::max(longest_loss_s, start < 0 ? 0.0 : utimeToSeconds(utime - start));
+  } else if (start >= 0) {
+    // The loss lasted until this frame, the first measured again (or a reset).
+    longest_loss_s = std::max(longest_loss_s, utimeToSeconds(utime - start));
+    loss_start_utime.store(-1, std::memory_order_relaxed);
+    loss_frames.store(0, std::memory_order_relaxed);
+  }
+}
+
+std::string TrackingTally::lossNote() const {
+  const Utime start = loss_start_utime.load(std::memory_order_relaxed);
+  if (start < 0) return {};
+  std::ostringstream out;
+  out.precision(2);
+  out << std::fixed << "tracking lost for "
+      << utimeToSeconds(latest_utime.load(std::memory_order_relaxed) - start) << " s ("
+      << loss_frames.load(std::memory_order_relaxed) << " frames)";
+  return out.str();
+}
+
+PublishStep::PublishStep(DaemonPublisher& publisher, std::string world_frame,
+                         std::string camera_frame, SpscQueue<PoseCorrection>* corrections)
+    : publisher_(publisher),
+      world_frame_(std::move(world_frame)),
+      camera_frame_(std::move(camera_frame)),
+      corrections_(corrections) {}
+
+void PublishStep::reset() {
+  correction_ = SE3::Identity();
+  corrected_ = false;
+}
+
+void PublishStep::process(EstimatedPacket packet) {
+  if (!enter(packet.reset_epoch, packet.frame)) return;
+  corrections_.take(resetEpoch(), [this](PoseCorrection correction) {
+    correction_ = correction.T_world_uncorrected;
+    relocalized_ = relocalized_ || correction.relocalized;
+    corrected_ = true;
+  });
+  if (!packet.frame || !packet.odometry) return;
+  PoseEstimate pose = packet.pose;
+  if (corrected_) {
+    pose = transformedPose(pose, correction_);
+    pose.source = PoseSource::kOptimized;
+  }
+  if (relocalized_ && pose.tracking_state == TrackingState::kOk) {
+    pose.tracking_state = TrackingState::kRelocalized;
+    relocalized_ = false;
+  }
+  pose.parent_frame = world_frame_;
+  pose.child_frame = camera_frame_;
+  tally_.record(pose.tracking_state, pose.utime);
+  publisher_.publishPose(pose);
+  end_to_end_.recordNs(steadyNowNs() - packet.frame->received_steady_ns);
+  publisher_.publishOdometry(*packet.odometry);
+  if (packet.vanishing_point) publisher_.publishVanishingPoint(pose.utime, *packet.vanishing_point);
+  // A lost pose, or the placeholder before tracking could start, is not an estimate.
+  if (pose.tracking_state != TrackingState::kLost &&
+      pose.tracking_state != TrackingState::kNotInitialized) {
+    trajectory_.push_back(StampedPose{utimeToSeconds(pose.utime), pose.T_world_camera});
+  }
+}
+
+// --- mapping ---------------------------------------------------------------------------------
+
+double largestKeyframeShiftM(const std::unordered_map<std::int64_t, SE3>& before,
+                             const std::vector<std::pair<std::int64_t, SE3>>& after) {
+  constexpr double kLeverArmM = 2.0;
+  double largest_m = 0.0;
+  for (const auto& [id, T_after] : after) {
+    const auto it = before.find(id);
+    if (it == before.end()) continue;
+    const SE3 delta = it->second.inverse() * T_after;
+    const double angle_rad = Eigen::AngleAxisd(delta.linear()).angle();
+    largest_m = std::max(largest_m, delta.translation().norm() + kLeverArmM * angle_rad);
+  }
+  return largest_m;
+}
+
+MappingStep::MappingStep(Mapper& mapper, const MappingConfig& config, DaemonPublisher& publisher,
+                         SpscQueue<MapCorrection>* corrections, SpscQueue<MapRequest>* requests)
+    : mapper_(mapper),
+      resolution_m_(config.resolution_m),
+      keyframes_only_(config.keyframes_only),
+      publisher_(publisher),
+      corrections_(corrections),
+      requests_(requests) {}
+
+void MappingStep::reset() {
+  mapper_.reset();
+  keyframe_map_poses_.clear();
+  T_world_uncorrected_ = SE3::Identity();
+}
+
+MappingStepStats MappingStep::stats() const {
+  return MappingStepStats{leaf_voxels_.load(std::memory_order_relaxed),
+                          occupied_voxels_.load(std::memory_order_relaxed)};
+}
+
+void MappingStep::applyCorrections() {
+  std::optional<BackendCorrection> newest;
+  corrections_.take(resetEpoch(),
+                    [&newest](MapCorrection item) { newest = std::move(item.correction); });
+  if (!newest) return;
+  T_world_uncorrected_ = newest->T_world_uncorrected;
+  // Re-integrating every keyframe cloud costs about one frame's integration per keyframe: only
+  // worth it when the correction moves the map by more than half a voxel.
+  const double shift_m = largestKeyframeShiftM(keyframe_map_poses_, newest->keyframe_poses);
+  if (shift_m < 0.5 * resolution_m_) return;
+  const RebuildResult rebuilt = mapper_.rebuild(newest->keyframe_poses);
+  for (const auto& [id, T_world_keyframe] : newest->keyframe_poses) {
+    auto it = keyframe_map_poses_.find(id);
+    if (it != keyframe_map_poses_.end()) it->second = T_world_keyframe;
+  }
+  SLAMD_LOG_INFO(kLog) << "map rebuilt from " << rebuilt.keyframes_integrated
+                       << " keyframe clouds after a correction of up to " << shift_m << " m";
+}
+
+void MappingStep::serveRequests() {
+  if (requests_ == nullptr) return;
+  while (auto request = requests_->tryPop()) {
+    if (request->kind == MapRequest::Kind::kPublish) {
+      publisher_.publishFullMap(mapper_.fullMap());
+      continue;
+    }
+    const MapFileResult saved = mapper_.saveMap(request->path);
+    if (saved.ok) {
+      SLAMD_LOG_INFO(kLog) << "SAVE_MAP: map written to " << saved.path;
+    } else {
+      SLAMD_LOG_ERROR(kLog) << "SAVE_MAP failed: " << saved.error;
+    }
+  }
+}
+
+void MappingStep::publishOutputs(const MapperOutputs& outputs) {
+  if (outputs.update && !outputs.update->voxels.empty()) {
+    publisher_.publishMapUpdate(*outputs.update);
+  }
+  if (outputs.full_map) publisher_.publishFullMap(*outputs.full_map);
+  if (outputs.snapshot) {
+    // Logged on each change between failing and succeeding, so a full disk gives one line per
+    // retry and one when it recovers, not one per period forever.
+    if (!outputs.snapshot->ok) {
+      SLAMD_LOG_WARN(kLog) << "map snapshot failed (kept in memory, the previous snapshot is "
+                              "intact; retrying): "
+                           << outputs.snapshot->error;
+    } else if (snapshot_failing_) {
+      SLAMD_LOG_INFO(kLog) << "map snapshot written again: " << outputs.snapshot->path;
+    }
+    snapshot_failing_ = !outputs.snapshot->ok;
+  }
+}
+
+void MappingStep::process(const EstimatedPacket& packet) {
+  if (!enter(packet.reset_epoch, packet.frame)) return;
+  applyCorrections();
+  serveRequests();
+  if (packet.frame && packet.odometry &&
+      packet.pose.tracking_state != TrackingState::kLost &&
+      packet.pose.tracking_state != TrackingState::kNotInitialized &&
+      (!keyframes_only_ || packet.odometry->is_keyframe)) {
+    std::optional<std::int64_t> keyframe_id;
+    if (packet.odometry->is_keyframe && packet.odometry->keyframe) {
+      keyframe_id = packet.odometry->keyframe->id;
+    }
+    const SE3 T_world_camera = T_world_uncorrected_ * packet.pose.T_world_camera;
+    const IntegrationResult result = mapper_.integrate(*packet.frame, T_world_camera, keyframe_id);
+    if (result.keyframe_cloud_kept && keyframe_id) {
+      keyframe_map_poses_[*keyframe_id] = T_world_camera;
+    }
+    if (result.status == IntegrationStatus::kBadFrame ||
+        result.status == IntegrationStatus::kBadPose) {
+      // The pipeline counts a thrown error against this stage and carries on.
+      throw std::runtime_error("frame not mapped: " + result.error);
+    }
+  }
+  publishOutputs(mapper_.poll(mapper_.latestUtime()));
+  leaf_voxels_.store(static_cast<std::int64_t>(mapper_.numLeafNodes()), std::memory_order_relaxed);
+  // Counting occupied voxels walks the tree: once a second is plenty for the status channel.
+  if (steadyNowNs() >= next_occupancy_count_ns_) {
+    auto count_occupied = [](const auto* tree) {
+      std::int64_t occupied = 0;
+      for (auto it = tree->begin_leafs(); it != tree->end_leafs(); ++it) {
+        if (tree->isNodeOccupied(*it)) ++occupied;
+      }
+      return occupied;
+    };
+    occupied_voxels_.store(mapper_.hasColor() ? count_occupied(mapper_.colorOcTree())
+                                              : count_occupied(mapper_.ocTree()),
+                           std::memory_order_relaxed);
+    next_occupancy_count_ns_ = steadyNowNs() + 1'000'000'000;
+  }
+}
+
+// --- back end --------------------------------------------------------------------------------
+
+BackendStep::BackendStep(BackendStage& backend, std::string world_frame,
+                         DaemonPublisher& publisher, SpscQueue<PoseCorrection>* pose_corrections,
+                         SpscQueue<MapCorrection>* map_corrections)
+    : backend_(backend),
+      world_frame_(std::move(world_frame)),
+      publisher_(publisher),
+      pose_corrections_(pose_corrections),
+      map_corrections_(map_corrections) {}
+
+BackendStepStats BackendStep::stats() const {
+  return BackendStepStats{keyframes_.load(std::memory_order_relaxed),
+                          loops_.load(std::memory_order_relaxed),
+                          relocalizations_.load(std::memory_order_relaxed)};
+}
+
+void BackendStep::process(const EstimatedPacket& packet) {
+  if (!enter(packet.reset_epoch, packet.frame)) return;
+  std::optional<BackendCorrection> correction = backend_.process(packet);
+  const BackendStageStats& stats = backend_.stats();
+  keyframes_.store(static_cast<std::int32_t>(stats.keyframes), std::memory_order_relaxed);
+  loops_.store(static_cast<std::int32_t>(stats.loops), std::memory_order_relaxed);
+  relocalizations_.store(static_cast<std::int32_t>(stats.relocalizations),
+                         std::memory_order_relaxed);
+  if (!correction) return;
+  correction->trajectory.frame_id = world_frame_;
+  publisher_.publishKeyframes(correction->trajectory);
+  if (pose_corrections_ &&
+      !pose_corrections_->tryPush(PoseCorrection{correction->T_world_uncorrected,
+                                                 correction->relocalized, resetEpoch()})) {
+    // Cannot happen while the publish step keeps up (it drains on every frame); if it does,
+    // the next correction replaces this one anyway.
+    SLAMD_LOG_WARN(kLog) << "pose correction not handed to the publish step: queue full";
+  }
+  if (map_corrections_ &&
+      !map_corrections_->tryPush(MapCorrection{std::move(*correction), resetEpoch()})) {
+    SLAMD_LOG_WARN(kLog) << "map correction not handed to the mapping step: queue full";
+  }
+}
+
+}  // namespace slamd

@@ -1,0 +1,309 @@
+// The daemon's stage steps driven by hand, without threads: packets wait in queues between the
+// steps as they do in the daemon, a RESET is issued while every stage still has packets from
+// before it queued, and each step's trace shows that it processed all of those before its reset
+// and none after.
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cstdint>
+#include <initializer_list>
+#include <thread>
+#include <vector>
+
+#include "daemon_fixture.hpp"
+#include "slamd/app/stage_steps.hpp"
+#include "slamd/backend/vocabulary.hpp"
+#include "slamd/pipeline/drop_oldest_queue.hpp"
+#include "slamd/pipeline/spsc_queue.hpp"
+#include "slamd/sources/create_frame_source.hpp"
+
+namespace slamd {
+namespace {
+
+/// Keeps what the steps publish instead of sending it.
+class RecordingPublisher final : public DaemonPublisher {
+ public:
+  void publishPose(const PoseEstimate& pose) override { poses.push_back(pose); }
+  void publishOdometry(const OdometryResult&) override {}
+  void publishVanishingPoint(Utime, const VanishingPointReport&) override {}
+  void publishKeyframes(const KeyframeTrajectory&) override {}
+  void publishMapUpdate(const MapUpdate&) override {}
+  void publishFullMap(const FullMap&) override {}
+  std::vector<PoseEstimate> poses;
+};
+
+using Trace = std::vector<StepTraceEntry>;
+
+/// A queue between two steps: FIFO, as the pipeline's edges are.
+template <typename T>
+using Edge = SpscQueue<T>;
+
+template <typename T>
+void push(Edge<T>& edge, const T& packet) {
+  ASSERT_TRUE(edge.tryPush(T(packet)));
+}
+
+/// Runs `step` on at most `count` packets waiting in `input`, handing what it returns to `out`.
+template <typename In, typename Step, typename Out>
+void drain(Edge<In>& input, Step& step, Out&& out, std::size_t count = SIZE_MAX) {
+  for (std::size_t i = 0; i < count; ++i) {
+    std::optional<In> packet = input.tryPop();
+    if (!packet) return;
+    out(step, std::move(*packet));
+  }
+}
+
+/// The reset happened exactly between the last packet captured before the RESET and the first
+/// captured after it: every packet of epoch e was processed after exactly e resets, and the frames
+/// were the ones captured before (`before`) and after (`after`) the RESET, in order. Heartbeats
+/// (utime -1) obey the same rule.
+void expectResetAtOnePointOfTheStream(const Trace& trace, const std::vector<Utime>& before,
+                                      const std::vector<Utime>& after, const char* stage) {
+  SCOPED_TRACE(stage);
+  std::vector<Utime> frames_before, frames_after;
+  for (std::size_t i = 0; i < trace.size(); ++i) {
+    const StepTraceEntry& entry = trace[i];
+    EXPECT_EQ(entry.resets, entry.reset_epoch)
+        << "packet " << i << " (utime " << entry.utime << ", epoch " << entry.reset_epoch
+        << ") was processed after " << entry.resets << " resets";
+    if (i > 0) {
+      EXPECT_GE(entry.reset_epoch, trace[i - 1].reset_epoch) << "packet " << i;
+    }
+    if (entry.utime < 0) continue;
+    (entry.reset_epoch == 0 ? frames_before : frames_after).push_back(entry.utime);
+  }
+  EXPECT_EQ(frames_before, before);
+  EXPECT_EQ(frames_after, after);
+}
+
+class DaemonStageSteps : public DaemonInProcess {
+ protected:
+  void SetUp() override {
+    DaemonInProcess::SetUp();
+    config_ = smallSyntheticConfig(kFrames);
+    config_.set("backend.enabled", "true");
+    config_.set("backend.vocabulary_depth", "2");
+    source_ = createFrameSource("synthetic:room", config_);
+    source_->open();
+  }
+
+  static constexpr int kFrames = 10;
+  Config config_;
+  std::unique_ptr<FrameSource> source_;
+};
+
+TEST_F(DaemonStageSteps, NoPacketFromBeforeAResetIsProcessedAfterAStageReset) {
+  const FilterConfig filter_config = FilterConfig::load(config_);
+  const MappingConfig mapping_config = MappingConfig::load(config_);
+  const BackendConfig backend_config = BackendConfig::load(config_);
+  Mapper mapper(mapping_config);
+  BackendStage backend(backend_config, loadOrTrainVocabulary(backend_config));
+  RecordingPublisher publisher;
+  SpscQueue<PoseCorrection> pose_corrections(64);
+  SpscQueue<MapCorrection> map_corrections(64);
+  SpscQueue<MapRequest> map_requests(4);
+  VanishingPointChannel vanishing_points;
+
+  CaptureStep capture(*source_, 1'000'000'000, {});
+  TrackingStep tracking(TrackingConfig::load(config_));
+  VanishingPointStep vanishing(filter_config, vanishing_points);
+  FilterStep filter(filter_config, &vanishing_points, std::chrono::microseconds(0));
+  PublishStep publish(publisher, "world", "camera", &pose_corrections);
+  MappingStep mapping(mapper, mapping_config, publisher, &map_corrections, &map_requests);
+  BackendStep backend_step(backend, "world", publisher, &pose_corrections, &map_corrections);
+  Trace tracking_trace, vanishing_trace, filter_trace, publish_trace, mapping_trace, backend_trace;
+  tracking.setTrace([&](const StepTraceEntry& e) { tracking_trace.push_back(e); });
+  vanishing.setTrace([&](const StepTraceEntry& e) { vanishing_trace.push_back(e); });
+  filter.setTrace([&](const StepTraceEntry& e) { filter_trace.push_back(e); });
+  publish.setTrace([&](const StepTraceEntry& e) { publish_trace.push_back(e); });
+  mapping.setTrace([&](const StepTraceEntry& e) { mapping_trace.push_back(e); });
+  backend_step.setTrace([&](const StepTraceEntry& e) { backend_trace.push_back(e); });
+
+  // The daemon's graph: capture -> {tracking, vanishing}; tracking -> filter;
+  // filter -> {publish, mapping, backend}.
+  Edge<CapturePacket> to_tracking(64), to_vanishing(64);
+  Edge<TrackedPacket> to_filter(64);
+  Edge<EstimatedPacket> to_publish(64), to_mapping(64), to_backend(64);
+  std::vector<Utime> before, after;
+  auto captureFrames = [&](int count, std::vector<Utime>& utimes) {
+    for (int i = 0; i < count; ++i) {
+      SourceStep<CapturePacket> step = capture.process();
+      ASSERT_EQ(step.kind, SourceStep<CapturePacket>::Kind::kItem);
+      ASSERT_TRUE(step.item->frame);
+      utimes.push_back(step.item->frame->utime);
+      push(to_tracking, *step.item);
+      push(to_vanishing, *step.item);
+    }
+  };
+  auto toFilter = [&](TrackingStep& step, CapturePacket packet) {
+    if (auto out = step.process(std::move(packet))) push(to_filter, *out);
+  };
+  auto detect = [](VanishingPointStep& step, CapturePacket packet) {
+    step.process(std::move(packet));
+  };
+  auto fanOut = [&](FilterStep& step, TrackedPacket packet) {
+    if (auto out = step.process(std::move(packet))) {
+      push(to_publish, *out);
+      push(to_mapping, *out);
+      push(to_backend, *out);
+    }
+  };
+  auto sink = [](auto& step, EstimatedPacket packet) { step.process(std::move(packet)); };
+
+  // Four frames captured; every stage has processed some of them and has others still queued.
+  captureFrames(4, before);
+  drain(to_vanishing, vanishing, detect, 3);
+  drain(to_tracking, tracking, toFilter, 3);
+  drain(to_filter, filter, fanOut, 2);
+  drain(to_publish, publish, sink, 1);
+  drain(to_mapping, mapping, sink, 1);
+  drain(to_backend, backend_step, sink, 1);
+  ASSERT_EQ(publish_trace.size(), 1u);
+
+  // RESET: the control thread's command. Frames keep coming.
+  capture.reset();
+  captureFrames(kFrames - 4, after);
+  // The stages catch up, the sinks a little behind the others.
+  drain(to_vanishing, vanishing, detect);
+  drain(to_tracking, tracking, toFilter);
+  drain(to_filter, filter, fanOut);
+  drain(to_backend, backend_step, sink);
+  drain(to_publish, publish, sink);
+  drain(to_mapping, mapping, sink);
+
+  expectResetAtOnePointOfTheStream(tracking_trace, before, after, "tracking");
+  expectResetAtOnePointOfTheStream(vanishing_trace, before, after, "vanishing");
+  expectResetAtOnePointOfTheStream(filter_trace, before, after, "filter");
+  expectResetAtOnePointOfTheStream(publish_trace, before, after, "publish");
+  expectResetAtOnePointOfTheStream(mapping_trace, before, after, "mapping");
+  expectResetAtOnePointOfTheStream(backend_trace, before, after, "backend");
+  for (const StepBase* step : std::initializer_list<const StepBase*>{
+           &tracking, &vanishing, &filter, &publish, &mapping, &backend_step}) {
+    EXPECT_EQ(step->resets(), 1u);
+    EXPECT_EQ(step->stalePackets(), 0u);
+  }
+  // The reset took effect where the stream says: the first frame after it starts a new world at
+  // the identity, and every pose before it continued the old one.
+  ASSERT_EQ(publisher.poses.size(), static_cast<std::size_t>(kFrames));
+  EXPECT_EQ(publisher.poses[before.size()].utime, after.front());
+  EXPECT_LT(publisher.poses[before.size()].T_world_camera.translation().norm(), 1e-9);
+  EXPECT_GT(publisher.poses[before.size() - 1].T_world_camera.translation().norm(), 1e-6);
+}
+
+TEST_F(DaemonStageSteps, AResetSurvivesAnEdgeThatDropsPacketsAndReachesStagesWhilePaused) {
+  CaptureStep capture(*source_, /*heartbeat_period_ns=*/0, {});
+  TrackingStep tracking(TrackingConfig::load(config_));
+  Trace trace;
+  tracking.setTrace([&](const StepTraceEntry& e) { trace.push_back(e); });
+
+  // A live source's edge keeps the newest two packets: the first packet after the RESET is
+  // evicted, and the reset still happens, at the next packet, which carries the same epoch.
+  DropOldestQueue<CapturePacket> to_tracking(2);
+  for (int i = 0; i < 3; ++i) to_tracking.push(*capture.process().item);
+  capture.reset();
+  std::vector<Utime> captured_after;
+  for (int i = 0; i < 3; ++i) {
+    CapturePacket packet = *capture.process().item;
+    captured_after.push_back(packet.frame->utime);
+    to_tracking.push(std::move(packet));
+  }
+  const std::vector<Utime> kept(captured_after.begin() + 1, captured_after.end());
+  while (auto packet = to_tracking.tryPop()) tracking.process(std::move(*packet));
+  ASSERT_EQ(trace.size(), 2u);
+  for (std::size_t i = 0; i < trace.size(); ++i) {
+    EXPECT_EQ(trace[i].utime, kept[i]);
+    EXPECT_EQ(trace[i].reset_epoch, 1u);
+    EXPECT_EQ(trace[i].resets, 1u);
+  }
+
+  // Paused, a recording sends heartbeats: a RESET rides on the next one.
+  capture.pause();
+  capture.reset();
+  SourceStep<CapturePacket> heartbeat = capture.process();
+  ASSERT_EQ(heartbeat.kind, SourceStep<CapturePacket>::Kind::kItem);
+  EXPECT_TRUE(heartbeat.item->isHeartbeat());
+  EXPECT_EQ(heartbeat.item->reset_epoch, 2u);
+  tracking.process(*heartbeat.item);
+  EXPECT_EQ(tracking.resets(), 2u);
+
+  // A packet from before the last reset (which FIFO edges never deliver) is refused, not
+  // processed.
+  const std::size_t traced = trace.size();
+  EXPECT_FALSE(tracking.process(CapturePacket{nullptr, 1}).has_value());
+  EXPECT_EQ(tracking.stalePackets(), 1u);
+  EXPECT_EQ(trace.size(), traced);
+}
+
+// The same steps on the daemon's threads: a RESET issued while frames are queued at every stage.
+TEST_F(DaemonStageSteps, OnThreadsEveryStageResetsAtTheSamePointOfTheStream) {
+  Config config = smallSyntheticConfig(40);
+  std::unique_ptr<FrameSource> source = createFrameSource("synthetic:room", config);
+  source->open();
+  const FilterConfig filter_config = FilterConfig::load(config);
+  const MappingConfig mapping_config = MappingConfig::load(config);
+  Mapper mapper(mapping_config);
+  RecordingPublisher publisher;
+  VanishingPointChannel vanishing_points;
+  CaptureStep capture(*source, 1'000'000'000, {});
+  TrackingStep tracking(TrackingConfig::load(config));
+  VanishingPointStep vanishing(filter_config, vanishing_points);
+  FilterStep filter(filter_config, &vanishing_points, std::chrono::seconds(2));
+  PublishStep publish(publisher, "world", "camera", nullptr);
+  MappingStep mapping(mapper, mapping_config, publisher, nullptr, nullptr);
+  // Each trace is written by its stage's thread only and read after the threads joined.
+  Trace tracking_trace, vanishing_trace, filter_trace, publish_trace, mapping_trace;
+  std::atomic<int> published{0};
+  tracking.setTrace([&](const StepTraceEntry& e) { tracking_trace.push_back(e); });
+  vanishing.setTrace([&](const StepTraceEntry& e) { vanishing_trace.push_back(e); });
+  filter.setTrace([&](const StepTraceEntry& e) { filter_trace.push_back(e); });
+  publish.setTrace([&](const StepTraceEntry& e) {
+    publish_trace.push_back(e);
+    published.fetch_add(1);
+  });
+  mapping.setTrace([&](const StepTraceEntry& e) { mapping_trace.push_back(e); });
+
+  // Small queues: capture cannot run far ahead, so the RESET lands in the middle of the stream.
+  const EdgeOptions edge{2, EdgePolicy::kBackpressure};
+  Pipeline pipeline(PipelineMode::kThreaded);
+  auto captured = pipeline.addSource<CapturePacket>("capture", [&] { return capture.process(); });
+  auto tracked = pipeline.addStage<CapturePacket, TrackedPacket>(
+      "tracking", captured, edge, [&](CapturePacket p) { return tracking.process(std::move(p)); });
+  pipeline.addSink<CapturePacket>("vanishing", captured, edge,
+                                  [&](CapturePacket p) { vanishing.process(std::move(p)); });
+  auto estimated = pipeline.addStage<TrackedPacket, EstimatedPacket>(
+      "filter", tracked, edge, [&](TrackedPacket p) { return filter.process(std::move(p)); });
+  pipeline.addSink<EstimatedPacket>("publish", estimated, edge,
+                                    [&](EstimatedPacket p) { publish.process(std::move(p)); });
+  pipeline.addSink<EstimatedPacket>("mapping", estimated, edge,
+                                    [&](EstimatedPacket p) { mapping.process(p); });
+  pipeline.start();
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(300);
+  while (published.load() < 10 && std::chrono::steady_clock::now() < deadline) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  capture.reset();  // the control thread's RESET
+  ASSERT_TRUE(pipeline.waitUntilFinished(deadline));
+  pipeline.stop(std::chrono::seconds(2));
+
+  // Where the RESET landed: the first frame capture stamped with the new epoch.
+  const auto first_after = std::find_if(tracking_trace.begin(), tracking_trace.end(),
+                                        [](const StepTraceEntry& e) { return e.reset_epoch == 1; });
+  ASSERT_NE(first_after, tracking_trace.end()) << "capture had finished before the RESET";
+  std::vector<Utime> before, after;
+  for (const StepTraceEntry& e : tracking_trace) {
+    if (e.utime >= 0) (e.reset_epoch == 0 ? before : after).push_back(e.utime);
+  }
+  EXPECT_GE(before.size(), 10u);
+  EXPECT_EQ(before.size() + after.size(), 40u);
+  expectResetAtOnePointOfTheStream(tracking_trace, before, after, "tracking");
+  expectResetAtOnePointOfTheStream(vanishing_trace, before, after, "vanishing");
+  expectResetAtOnePointOfTheStream(filter_trace, before, after, "filter");
+  expectResetAtOnePointOfTheStream(publish_trace, before, after, "publish");
+  expectResetAtOnePointOfTheStream(mapping_trace, before, after, "mapping");
+}
+
+}  // namespace
+}  // namespace slamd
