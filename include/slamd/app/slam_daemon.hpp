@@ -1,6 +1,7 @@
 #pragma once
-// SlamDaemon: the slamd program. Wires the capture, tracking, filter, publishing and mapping
-// stages with the pipeline runner (one thread each, bounded lock-free queues between them),
+// SlamDaemon: the slamd program. Wires the capture, tracking, filter, publishing, mapping and
+// back-end stages with the pipeline runner (one thread each, bounded lock-free queues between
+// them),
 // speaks LCM to the rest of the robot, and runs until the source ends, a SHUTDOWN command arrives
 // or the process is signalled.
 //
@@ -10,9 +11,12 @@
 //   reportConfig(config, "slamd");
 //   return daemon.run(signals);                 // exit code
 //
-// Threads: capture, tracking, filter, publish and mapping belong to the pipeline; the LCM bus has
-// its own receive thread (commands only: it pushes them into a queue); the calling thread runs
-// the control loop (commands, 1 Hz status) and, after the pipeline has stopped, writes outputs.
+// Threads: capture, tracking, filter, publish and mapping belong to the pipeline, and so do the
+// back end (backend.enabled: keyframes, loop closing, pose graph; its corrections go to publish
+// and mapping) and vanishing-point detection (daemon.vanishing_point_thread with the filter on:
+// in parallel with tracking, joined by the filter); the LCM bus has its own receive thread
+// (commands only: it pushes them into a queue); the calling thread runs the control loop
+// (commands, 1 Hz status) and, after the pipeline has stopped, writes outputs.
 
 #include <functional>
 #include <memory>
