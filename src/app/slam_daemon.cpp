@@ -14,7 +14,7 @@
 #include "slamd/app/backend_stage.hpp"
 #include "slamd/app/command_save_path.hpp"
 #include "slamd/app/daemon_config.hpp"
-#include "slamd/app/daemon_messages.hpp"
+#include "slamd/comms/odometry_codec.hpp"
 #include "slamd/app/pose_estimator.hpp"
 #include "slamd/command_t.hpp"
 #include "slamd/common/file_io.hpp"
