@@ -38,6 +38,7 @@
 #include "slamd/eval/metrics_report.hpp"
 #include "slamd/eval/trajectory_error.hpp"
 #include "slamd/sources/create_frame_source.hpp"
+#include "vocabulary_training.hpp"
 #include "slamd/tracking/visual_odometry.hpp"
 
 using namespace slamd;
@@ -188,7 +189,7 @@ int main(int argc, char** argv) {
   try {
     if (options.has("vocabulary")) backend_config.vocabulary_file = options.value("vocabulary");
     if (!backend_config.vocabulary_file.empty()) {
-      vocabulary = loadOrTrainVocabulary(backend_config);
+      vocabulary = loadVocabulary(backend_config);
     } else {
       vocabulary = std::make_shared<const Vocabulary>(trainVocabularyOnSyntheticScene(
           options.value("vocabulary-scene"), backend_config.vocabulary_branching,

@@ -41,9 +41,10 @@ const ConfigSchema<BackendConfig>& BackendConfig::schema() {
           .number("odometry_sigma_rad", &C::odometry_sigma_rad, 1e-5, 1.0, "rad",
                   "odometry edge rotation sigma, per axis")
           .number("vocabulary_branching", &C::vocabulary_branching, 2, 32, "",
-                  "children per vocabulary node")
+                  "children per vocabulary node (slamd-vocabulary training)")
           .number("vocabulary_depth", &C::vocabulary_depth, 1, 6, "",
-                  "levels of the vocabulary tree (words = branching^depth at most)")
+                  "levels of the vocabulary tree (words = branching^depth at most; "
+                  "slamd-vocabulary training)")
           .number("loop_min_score", &C::loop_min_score, 0.0, 1.0, "",
                   "minimum TF-IDF cosine similarity (L1-normalised BoW vectors) of a loop "
                   "candidate")
@@ -119,8 +120,9 @@ const ConfigSchema<BackendConfig>& BackendConfig::schema() {
           .number("relocalization_min_inliers", &C::relocalization_min_inliers, 6, 10000, "",
                   "inliers after refinement for a relocalisation")
           .text("vocabulary_file", &C::vocabulary_file,
-                "vocabulary written by slamd-vocabulary; empty = train one at start-up on the "
-                "synthetic room (about a second)");
+                "vocabulary file (slamd-vocabulary writes one); empty = the one built and "
+                "installed with slamd (share/slamd/orb_vocabulary.voc beside the program's "
+                "bin/); a missing or corrupt file is a configuration error");
   return table;
 }
 

@@ -37,8 +37,7 @@ Fr1Run runFr1(const std::filesystem::path& folder, int blackout_start, int black
   Config config = Config::fromFile(std::string(SLAMD_SOURCE_DIR) + "/config/tum_fr1.yaml");
   std::unique_ptr<FrameSource> source = createFrameSource("tum:" + folder.string(), config);
   VisualOdometry vo(TrackingConfig::load(config));
-  static const auto vocabulary = std::make_shared<const Vocabulary>(
-      trainVocabularyOnSyntheticScene("room", 8, 3));
+  static const auto vocabulary = loadVocabulary(BackendConfig());  // the one the build wrote
   Backend backend(backend_config, vocabulary);
   KeyframeAnchoredTrajectory trajectory;
   Fr1Run run;

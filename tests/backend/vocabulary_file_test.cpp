@@ -128,28 +128,48 @@ TEST(VocabularyFile, WrongVersionAndForeignFilesGiveClearErrors) {
   EXPECT_THROW(Vocabulary::load(tempPath("does_not_exist.voc")), VocabularyError);
 }
 
-TEST(VocabularyFile, LoadOrTrainLoadsTheConfiguredFile) {
+TEST(VocabularyFile, LoadVocabularyLoadsTheConfiguredFile) {
   const std::string path = tempPath("configured.voc");
   smallVocabulary().save(path);
   BackendConfig config;
   config.vocabulary_file = path;
-  const auto loaded = loadOrTrainVocabulary(config);
+  const auto loaded = loadVocabulary(config);
   ASSERT_NE(loaded, nullptr);
   EXPECT_EQ(serialised(*loaded), serialised(smallVocabulary()));
-  config.vocabulary_file = tempPath("missing.voc");
-  EXPECT_THROW(loadOrTrainVocabulary(config), VocabularyError);
   std::remove(path.c_str());
 }
 
-TEST(VocabularyFile, LoadOrTrainTrainsOnTheSyntheticRoomWithoutAFile) {
+TEST(VocabularyFile, AMissingOrCorruptFileIsAnErrorNamingIt) {
   BackendConfig config;
-  config.vocabulary_branching = 4;
-  config.vocabulary_depth = 2;
-  const auto trained = loadOrTrainVocabulary(config);
-  ASSERT_NE(trained, nullptr);
-  EXPECT_GT(trained->numWords(), 4);
-  EXPECT_LE(trained->numWords(), 16);
-  EXPECT_EQ(trained->branching(), 4);
+  config.vocabulary_file = tempPath("missing.voc");
+  try {
+    loadVocabulary(config);
+    ADD_FAILURE() << "a missing file loaded";
+  } catch (const VocabularyError& e) {
+    EXPECT_NE(std::string(e.what()).find(config.vocabulary_file), std::string::npos) << e.what();
+  }
+  config.vocabulary_file = tempPath("corrupt.voc");
+  std::string bytes = serialised(smallVocabulary());
+  bytes[bytes.size() / 2] ^= 0x5a;  // caught by the checksum
+  std::ofstream(config.vocabulary_file, std::ios::binary) << bytes;
+  try {
+    loadVocabulary(config);
+    ADD_FAILURE() << "a corrupt file loaded";
+  } catch (const VocabularyError& e) {
+    EXPECT_NE(std::string(e.what()).find(config.vocabulary_file), std::string::npos) << e.what();
+  }
+  std::remove(config.vocabulary_file.c_str());
+}
+
+TEST(VocabularyFile, TheBuiltVocabularyIsFoundNextToTheProgram) {
+  // Test programs live in <build>/bin like slamd; the build writes <build>/share/slamd/.
+  const std::string path = defaultVocabularyPath();
+  EXPECT_NE(path.find("share/slamd/orb_vocabulary.voc"), std::string::npos) << path;
+  const auto built = loadVocabulary(BackendConfig());  // empty vocabulary_file: the built one
+  ASSERT_NE(built, nullptr);
+  EXPECT_EQ(built->branching(), BackendConfig().vocabulary_branching);
+  EXPECT_EQ(built->depth(), BackendConfig().vocabulary_depth);
+  EXPECT_GT(built->numWords(), 100);
 }
 
 TEST(BackendConfig, ReadsTheVocabularyFileAndBackEndKeys) {

@@ -65,7 +65,7 @@ TEST(TumBadInput, MissingFolderIsASourceErrorNamingIt) {
 }
 
 TEST(TumBadInput, EmptyFolderIsASourceErrorNamingTheMissingList) {
-  const auto dir = test::makeTempDir("tum-empty");
+  const test::ScopedTempDir dir("tum-empty");
   TumSource source(dir.string(), test::smallTumConfig());
   try {
     source.open();

@@ -11,6 +11,7 @@
 #include <fstream>
 #include <sstream>
 
+#include "scoped_temp_dir.hpp"
 #include "test_data.hpp"
 #include "tum_fixture.hpp"
 
@@ -41,7 +42,7 @@ TEST(LcmLogReplay, LoggedAndReplayedFramesEqualThePublishedOnes) {
   }
   constexpr int kFrames = 6;
   const auto folder = test::writeTumFolder("lcm-replay-data", kFrames, false);
-  const auto dir = test::makeTempDir("lcm-replay");
+  const test::ScopedTempDir dir("lcm-replay");
   const std::string play = SLAMD_PLAY_PATH;
   const std::string common =
       " --lcm-url \"$URL\" --list --set camera.width=64 --set camera.height=48"

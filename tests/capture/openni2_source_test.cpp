@@ -5,6 +5,7 @@
 #include <cmath>
 #include <filesystem>
 
+#include "scoped_temp_dir.hpp"
 #include "test_data.hpp"
 
 namespace slamd {
@@ -50,7 +51,7 @@ TEST(OpenNi2Source, DummyDeviceDeliversRegisteredDepthAndColourFrames) {
 }
 
 TEST(OpenNi2Source, OniRecordedFromTheDummyDeviceOpensWithItsFrames) {
-  const auto dir = test::makeTempDir("oni");
+  const test::ScopedTempDir dir("oni");
   const std::string path = (dir / "dummy.oni").string();
   recordOni("Dummy", path, 12);
   ASSERT_TRUE(std::filesystem::exists(path));

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "slamd/capture/tum_source.hpp"
+#include "scoped_temp_dir.hpp"
 #include "test_data.hpp"
 
 namespace slamd::test {
@@ -36,7 +37,7 @@ inline cv::Mat makeDepthRaw(int width, int height, int frame) {
 }
 
 struct TumFolder {
-  std::filesystem::path dir;
+  ScopedTempDir dir;  ///< removed with the TumFolder
   std::vector<double> rgb_times;
   std::vector<double> depth_times;
 };
@@ -44,8 +45,7 @@ struct TumFolder {
 /// `count` frames at 30 Hz, colour as PNG or JPEG, depth 3 ms later than colour.
 inline TumFolder writeTumFolder(const std::string& tag, int count, bool jpeg_color, int width = 64,
                                 int height = 48) {
-  TumFolder folder;
-  folder.dir = makeTempDir(tag);
+  TumFolder folder{ScopedTempDir(tag), {}, {}};
   std::filesystem::create_directories(folder.dir / "rgb");
   std::filesystem::create_directories(folder.dir / "depth");
   std::ofstream rgb(folder.dir / "rgb.txt");

@@ -5,6 +5,7 @@
 #include <utility>
 
 #include "slamd/common/config.hpp"
+#include "scoped_temp_dir.hpp"
 #include "test_data.hpp"
 
 namespace slamd {
@@ -41,7 +42,7 @@ TEST(Config, MissingKeysTakeTheirDefaults) {
 }
 
 TEST(Config, ReadsAFile) {
-  const auto dir = test::makeTempDir("config");
+  const test::ScopedTempDir dir("config");
   const auto path = dir / "test.yaml";
   std::ofstream(path) << "%YAML:1.0\n---\n" << kYaml;
   Config config = Config::fromFile(path.string());
@@ -52,7 +53,7 @@ TEST(Config, ReadsAFile) {
 // Hostile-input issue, row 7: a file nested 50,000 deep crashed the parser (SIGSEGV), /dev/zero
 // grew memory without bound, and a directory ran silently on defaults with exit 0.
 TEST(Config, DeeplyNestedYamlIsAConfigErrorNotACrash) {
-  const auto dir = test::makeTempDir("config-nested");
+  const test::ScopedTempDir dir("config-nested");
   std::string indented = "a:\n";
   for (int level = 1; indented.size() < 900000; ++level) {
     indented += std::string(static_cast<std::size_t>(level), ' ') + "b:\n";
@@ -74,11 +75,10 @@ TEST(Config, DeeplyNestedYamlIsAConfigErrorNotACrash) {
       EXPECT_NE(std::string(e.what()).find(path.string()), std::string::npos) << e.what();
     }
   }
-  std::filesystem::remove_all(dir);
 }
 
 TEST(Config, ADeviceADirectoryOrAHugeFileIsRefusedNamingIt) {
-  const auto dir = test::makeTempDir("config-special");
+  const test::ScopedTempDir dir("config-special");
   const auto huge = dir / "huge.yaml";
   std::ofstream(huge) << "# " << std::string(2 << 20, 'x') << "\n";
   for (const std::string& path : {std::string("/dev/zero"), dir.string(), huge.string()}) {
@@ -89,11 +89,10 @@ TEST(Config, ADeviceADirectoryOrAHugeFileIsRefusedNamingIt) {
       EXPECT_NE(std::string(e.what()).find(path), std::string::npos) << e.what();
     }
   }
-  std::filesystem::remove_all(dir);
 }
 
 TEST(Config, ReadsAFileWithoutYamlDirective) {
-  const auto dir = test::makeTempDir("config");
+  const test::ScopedTempDir dir("config");
   const auto path = dir / "plain.yaml";
   std::ofstream(path) << kYaml;
   Config config = Config::fromFile(path.string());

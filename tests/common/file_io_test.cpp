@@ -9,6 +9,7 @@
 #include <fstream>
 #include <sstream>
 
+#include "scoped_temp_dir.hpp"
 #include "test_data.hpp"
 
 namespace slamd {
@@ -25,13 +26,12 @@ bool writeText(const std::string& path, const std::string& text, std::string* er
 }
 
 TEST(FileIo, ANewFileIsWrittenWhole) {
-  const auto dir = test::makeTempDir("file-io");
+  const test::ScopedTempDir dir("file-io");
   const std::string path = (dir / "out.txt").string();
   std::string error;
   ASSERT_TRUE(writeText(path, std::string(300000, 'x'), &error)) << error;
   EXPECT_EQ(std::filesystem::file_size(path), 300000u);
   EXPECT_FALSE(std::filesystem::exists(temporaryPathFor(path)));
-  std::filesystem::remove_all(dir);
 }
 
 TEST(FileIo, AFullDeviceIsAnErrorWithTheReason) {
@@ -43,13 +43,12 @@ TEST(FileIo, AFullDeviceIsAnErrorWithTheReason) {
 }
 
 TEST(FileIo, AMissingFolderOrADirectoryIsAnErrorNamingThePath) {
-  const auto dir = test::makeTempDir("file-io");
+  const test::ScopedTempDir dir("file-io");
   std::string error;
   EXPECT_FALSE(writeText((dir / "missing" / "out.txt").string(), "x", &error));
   EXPECT_NE(error.find("No such file or directory"), std::string::npos) << error;
   EXPECT_FALSE(writeText(dir.string(), "x", &error));
   EXPECT_NE(error.find("directory"), std::string::npos) << error;
-  std::filesystem::remove_all(dir);
 }
 
 }  // namespace

@@ -3,13 +3,14 @@
 #include <fstream>
 
 #include "slamd/common/program_options.hpp"
+#include "scoped_temp_dir.hpp"
 #include "test_data.hpp"
 
 namespace slamd {
 namespace {
 
 TEST(ProgramOptions, ParsesConfigSetsOptionsFlagsAndPositionals) {
-  const auto dir = test::makeTempDir("options");
+  const test::ScopedTempDir dir("options");
   const auto path = dir / "c.yaml";
   std::ofstream(path) << "tracking:\n  max_features: 500\n";
   ProgramOptions options("prog", "test");

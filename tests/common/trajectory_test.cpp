@@ -3,6 +3,7 @@
 #include <fstream>
 
 #include "slamd/common/trajectory.hpp"
+#include "scoped_temp_dir.hpp"
 #include "test_data.hpp"
 
 namespace slamd {
@@ -40,7 +41,8 @@ TEST(Trajectory, WriteThenReadRoundTrips) {
     p.T_world_camera = expSE3((Vector6d() << 0.1 * i, -0.2, 0.3, 0.01 * i, 0.2, -0.1).finished());
     t.push_back(p);
   }
-  const auto path = test::makeTempDir("traj") / "t.txt";
+  const test::ScopedTempDir dir("traj");
+  const auto path = dir / "t.txt";
   writeTumTrajectory(path.string(), t, "written by a test\nsecond line");
   const Trajectory back = readTumTrajectory(path.string());
   ASSERT_EQ(back.size(), t.size());

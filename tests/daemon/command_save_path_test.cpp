@@ -7,6 +7,7 @@
 
 #include <filesystem>
 
+#include "scoped_temp_dir.hpp"
 #include "test_data.hpp"
 
 namespace slamd {
@@ -16,15 +17,14 @@ namespace fs = std::filesystem;
 
 class CommandSavePath : public ::testing::Test {
  protected:
-  void SetUp() override { dir_ = test::makeTempDir("save-dir"); }
-  void TearDown() override { fs::remove_all(dir_); }
 
   std::optional<std::string> resolve(const std::string& argument) {
     error_.clear();
     return resolveCommandSavePath(argument, dir_.string(), error_);
   }
 
-  fs::path dir_;
+  const test::ScopedTempDir temp_{"save-dir"};
+  const fs::path dir_ = temp_.path();
   std::string error_;
 };
 

@@ -12,20 +12,14 @@
 #include "slamd/common/log.hpp"
 #include "slamd/common/program_options.hpp"
 #include "slamd/common/shutdown_signals.hpp"
-#include "test_data.hpp"
+#include "scoped_temp_dir.hpp"
 
 namespace slamd {
 
 class DaemonInProcess : public ::testing::Test {
  protected:
-  void SetUp() override {
-    setLogLevel(LogLevel::kWarn);
-    dir_ = test::makeTempDir("daemon");
-  }
-  void TearDown() override {
-    setLogLevel(LogLevel::kInfo);
-    std::filesystem::remove_all(dir_);
-  }
+  void SetUp() override { setLogLevel(LogLevel::kWarn); }
+  void TearDown() override { setLogLevel(LogLevel::kInfo); }
 
   Config smallSyntheticConfig(int frames) {
     Config config = Config::fromFile(std::string(SLAMD_SOURCE_DIR) + "/config/synthetic.yaml");
@@ -46,7 +40,8 @@ class DaemonInProcess : public ::testing::Test {
     return daemon.summary();
   }
 
-  std::filesystem::path dir_;
+  const test::ScopedTempDir temp_{"daemon"};  // removed with the fixture
+  const std::filesystem::path dir_ = temp_.path();
 };
 
 }  // namespace slamd

@@ -76,9 +76,7 @@ TEST_F(DaemonInProcess, ShutdownRequestDrainsQueuedFramesAndStillWritesOutputs) 
 
 TEST_F(DaemonInProcess, BackEndThreadRunsAlongsideTheOtherStages) {
   Config config = smallSyntheticConfig(60);
-  config.set("backend.enabled", "true");
-  // A small vocabulary: trained in a fraction of the time (this test also runs under TSan).
-  config.set("backend.vocabulary_depth", "2");
+  config.set("backend.enabled", "true");  // loads the vocabulary the build wrote
   DaemonOverrides overrides;
   overrides.source = "synthetic:room";
   overrides.trajectory_out = (dir_ / "trajectory.txt").string();
@@ -168,6 +166,21 @@ TEST_F(DaemonInProcess, TwoOutputsNamingTheSameFileAreAConfigurationError) {
     FAIL() << "no error";
   } catch (const ConfigError& e) {
     EXPECT_NE(std::string(e.what()).find("out.bt"), std::string::npos) << e.what();
+  }
+}
+
+TEST_F(DaemonInProcess, AMissingVocabularyFileIsAConfigurationErrorNamingIt) {
+  Config config = smallSyntheticConfig(5);
+  config.set("backend.enabled", "true");
+  const std::string missing = (dir_ / "missing.voc").string();
+  config.set("backend.vocabulary_file", missing);
+  DaemonOverrides overrides;
+  overrides.source = "synthetic:room";
+  try {
+    SlamDaemon daemon(config, overrides);
+    FAIL() << "no error";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find(missing), std::string::npos) << e.what();
   }
 }
 

@@ -10,6 +10,7 @@
 #include <fstream>
 #include <sstream>
 
+#include "scoped_temp_dir.hpp"
 #include "test_data.hpp"
 
 namespace slamd {
@@ -40,7 +41,7 @@ class DaemonScenario : public ::testing::Test {
 
   // Runs scenarios/<name>.sh; returns its exit status and leaves its log in *log.
   int run(const std::string& name, std::string* log) {
-    const auto work = test::makeTempDir("scenario-" + name);
+    test::ScopedTempDir work("scenario-" + name);
     const auto script =
         std::filesystem::path(SLAMD_SOURCE_DIR) / "tests" / "daemon" / "scenarios" / (name + ".sh");
     const auto log_path = work / "scenario.log";
@@ -50,7 +51,7 @@ class DaemonScenario : public ::testing::Test {
                                 log_path.string() + "' 2>&1";
     const int status = std::system(command.c_str());
     *log = readFile(log_path);
-    if (WIFEXITED(status) && WEXITSTATUS(status) == 0) std::filesystem::remove_all(work);
+    if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) work.keep();  // its logs, to look at
     return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
   }
 };

@@ -5,6 +5,8 @@
 
 #include <gtest/gtest.h>
 
+#include <opencv2/core.hpp>
+
 #include <algorithm>
 #include <atomic>
 #include <chrono>
@@ -83,6 +85,9 @@ class DaemonStageSteps : public DaemonInProcess {
  protected:
   void SetUp() override {
     DaemonInProcess::SetUp();
+    // The steps run OpenCV on the calling thread, as the daemon does (daemon.opencv_threads = 0):
+    // OpenCV's own worker pool is not instrumented, and ThreadSanitizer would report it.
+    cv::setNumThreads(0);
     config_ = smallSyntheticConfig(kFrames);
     config_.set("backend.enabled", "true");
     config_.set("backend.vocabulary_depth", "2");

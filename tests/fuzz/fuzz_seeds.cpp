@@ -20,7 +20,7 @@
 #include <octomap/OcTree.h>
 
 #include "frame_codec_layout.hpp"
-#include "slamd/app/daemon_messages.hpp"
+#include "slamd/comms/odometry_codec.hpp"
 #include "slamd/backend/vocabulary.hpp"
 #include "slamd/common/config.hpp"
 #include "slamd/comms/frame_codec.hpp"

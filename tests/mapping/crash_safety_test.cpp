@@ -24,6 +24,7 @@
 #include "box_room.hpp"
 #include "slamd/common/file_io.hpp"
 #include "slamd/mapping/mapper.hpp"
+#include "scoped_temp_dir.hpp"
 #include "test_data.hpp"
 
 namespace slamd {
@@ -109,7 +110,7 @@ void parseReports(const std::string& text, SaveLog& log) {
 
 TEST(MapSaveCrashSafety, KillNineAtRandomMomentsNeverLosesOrTearsASavedMap) {
   constexpr int kTrials = 100;
-  const fs::path dir = test::makeTempDir("kill9");
+  const test::ScopedTempDir dir("kill9");
   std::mt19937 random(20261202);
   int torn_temporaries = 0;
   int newer_than_reported = 0;
@@ -183,7 +184,6 @@ TEST(MapSaveCrashSafety, KillNineAtRandomMomentsNeverLosesOrTearsASavedMap) {
   std::printf("%d kill -9 trials: %d killed mid-write (temporary file left and removed), %d just "
               "after a rename, 0 saved maps lost or torn\n",
               kTrials, torn_temporaries, newer_than_reported);
-  fs::remove_all(dir);
 }
 
 }  // namespace

@@ -9,6 +9,7 @@
 #include "box_room.hpp"
 #include "slamd/mapping/map_io.hpp"
 #include "slamd/mapping/mapper.hpp"
+#include "scoped_temp_dir.hpp"
 #include "test_data.hpp"
 
 namespace slamd {
@@ -302,14 +303,13 @@ TEST(Mapper, ProjectionShowsWallsAsObstaclesAroundFreeFloorSpace) {
   EXPECT_EQ(grid.at(3.0, 0.0), OccupancyGrid2D::kUnknown);
   EXPECT_NEAR(grid.origin_u_m, -2.05, 1e-9);
   EXPECT_NEAR(grid.origin_v_m, -2.05, 1e-9);
-  const auto dir = test::makeTempDir("grid");
+  const test::ScopedTempDir dir("grid");
   std::string error;
   ASSERT_TRUE(saveOccupancyGrid(grid, (dir / "room.pgm").string(), &error)) << error;
   ASSERT_TRUE(saveOccupancyGrid(grid, (dir / "room.png").string(), &error)) << error;
   const cv::Mat pgm = cv::imread((dir / "room.pgm").string(), cv::IMREAD_UNCHANGED);
   ASSERT_EQ(pgm.size(), grid.cells.size());
   EXPECT_TRUE(std::filesystem::exists(dir / "room.yaml"));
-  std::filesystem::remove_all(dir);
 }
 
 TEST(Mapper, PlyExportsHoldEveryOccupiedVoxelWithColour) {
@@ -324,7 +324,7 @@ TEST(Mapper, PlyExportsHoldEveryOccupiedVoxelWithColour) {
   ASSERT_TRUE(mapper.hasColor());
   const PointCloud occupied = mapper.occupiedCloud();
   ASSERT_GT(occupied.size(), 1000u);
-  const auto dir = test::makeTempDir("ply");
+  const test::ScopedTempDir dir("ply");
   for (const PlyFormat format : {PlyFormat::kAscii, PlyFormat::kBinary}) {
     const std::string path = (dir / "map.ply").string();
     ASSERT_TRUE(mapper.exportOccupiedPly(path, format).ok);
@@ -342,7 +342,6 @@ TEST(Mapper, PlyExportsHoldEveryOccupiedVoxelWithColour) {
   PointCloud kf;
   ASSERT_TRUE(readPly((dir / "kf.ply").string(), kf));
   EXPECT_GT(kf.size(), 1000u);
-  std::filesystem::remove_all(dir);
 }
 
 }  // namespace

@@ -9,6 +9,7 @@
 #include "box_room.hpp"
 #include "slamd/mapping/map_io.hpp"
 #include "slamd/mapping/mapper.hpp"
+#include "scoped_temp_dir.hpp"
 #include "test_data.hpp"
 
 namespace slamd {
@@ -64,7 +65,7 @@ voxelStates(const octomap::AbstractOccupancyOcTree& any_tree) {
 TEST(MapPersistence, SavedBtReadsBackWithTheSameOccupancyEverywhere) {
   Mapper mapper(quietConfig());
   mapSomeRoom(mapper, 12);
-  const auto dir = test::makeTempDir("bt");
+  const test::ScopedTempDir dir("bt");
   const std::string path = (dir / "room.bt").string();
   const MapFileResult saved = mapper.saveMap(path);
   ASSERT_TRUE(saved.ok) << saved.error;
@@ -76,13 +77,12 @@ TEST(MapPersistence, SavedBtReadsBackWithTheSameOccupancyEverywhere) {
   const auto loaded = voxelStates(back);
   ASSERT_GT(original.size(), 10000u);
   EXPECT_TRUE(original == loaded);
-  fs::remove_all(dir);
 }
 
 TEST(MapPersistence, SavedOtKeepsEveryLogOddsAndLoadsToContinueMapping) {
   Mapper mapper(quietConfig());
   mapSomeRoom(mapper, 6);
-  const auto dir = test::makeTempDir("ot");
+  const test::ScopedTempDir dir("ot");
   const MapFileResult saved = mapper.saveMaps((dir / "room").string());
   ASSERT_TRUE(saved.ok) << saved.error;
   ASSERT_TRUE(fs::exists(dir / "room.bt"));
@@ -114,7 +114,6 @@ TEST(MapPersistence, SavedOtKeepsEveryLogOddsAndLoadsToContinueMapping) {
   missing.load_path = (dir / "nope.ot").string();
   EXPECT_THROW(Mapper{missing}, std::runtime_error);
   EXPECT_FALSE(resumed.loadMap((dir / "room.txt").string()).ok);
-  fs::remove_all(dir);
 }
 
 TEST(MapPersistence, AColourMapSavedAsOtLoadsBackWithItsColours) {
@@ -122,7 +121,7 @@ TEST(MapPersistence, AColourMapSavedAsOtLoadsBackWithItsColours) {
   config.color = true;
   Mapper colored(config);
   mapSomeRoom(colored, 3);
-  const auto dir = test::makeTempDir("color");
+  const test::ScopedTempDir dir("color");
   const std::string path = (dir / "color.ot").string();
   ASSERT_TRUE(colored.saveMap(path).ok);
   Mapper plain(quietConfig());  // configured without colour: the file's tree type wins
@@ -133,11 +132,10 @@ TEST(MapPersistence, AColourMapSavedAsOtLoadsBackWithItsColours) {
   const PointCloud b = plain.occupiedCloud();
   ASSERT_EQ(a.size(), b.size());
   EXPECT_TRUE(a.colors_bgr == b.colors_bgr);
-  fs::remove_all(dir);
 }
 
 TEST(MapPersistence, AWriteThatFailsLeavesThePreviousFileIntact) {
-  const auto dir = test::makeTempDir("atomic");
+  const test::ScopedTempDir dir("atomic");
   const std::string path = (dir / "file.txt").string();
   ASSERT_TRUE(writeFileAtomically(path, [](std::ostream& out) {
     out << "version one\n";
@@ -162,11 +160,10 @@ TEST(MapPersistence, AWriteThatFailsLeavesThePreviousFileIntact) {
   EXPECT_FALSE(fs::exists(temporaryPathFor(path)));
   EXPECT_FALSE(writeFileAtomically((dir / "no" / "such" / "dir.txt").string(),
                                    [](std::ostream&) { return true; }, &error));
-  fs::remove_all(dir);
 }
 
 TEST(MapPersistence, ASnapshotKilledMidWriteLeavesThePreviousSnapshotIntact) {
-  const auto dir = test::makeTempDir("snapshot");
+  const test::ScopedTempDir dir("snapshot");
   MappingConfig config = quietConfig();
   config.snapshot_path = (dir / "snapshot.bt").string();
   config.snapshot_period_s = 1.0;
@@ -210,11 +207,10 @@ TEST(MapPersistence, ASnapshotKilledMidWriteLeavesThePreviousSnapshotIntact) {
   ASSERT_TRUE(latest.readBinary(config.snapshot_path));
   EXPECT_TRUE(voxelStates(latest) == voxelStates(*mapper.ocTree()));
   EXPECT_EQ(mapper.stats().snapshots_written, 2);
-  fs::remove_all(dir);
 }
 
 TEST(MapPersistence, AFailedSnapshotIsRetriedSoonerThanThePeriodUntilItSucceeds) {
-  const auto dir = test::makeTempDir("snapshot-retry");
+  const test::ScopedTempDir dir("snapshot-retry");
   MappingConfig config = quietConfig();
   config.snapshot_path = (dir / "gone" / "snapshot.bt").string();  // the folder is missing
   config.snapshot_period_s = 30.0;
@@ -242,13 +238,12 @@ TEST(MapPersistence, AFailedSnapshotIsRetriedSoonerThanThePeriodUntilItSucceeds)
   // Back to the period.
   EXPECT_FALSE(mapper.poll(t0 + 40'000'000).snapshot.has_value());
   EXPECT_TRUE(mapper.poll(t0 + 63'000'000).snapshot.has_value());
-  fs::remove_all(dir);
 }
 
 // OctoMap's readers trust their input: a stream whose every node claims children made them recurse
 // without bound. Map files are checked first (octree_stream.hpp) and refused with the reason.
 TEST(MapPersistence, CorruptMapFilesAreRefusedWithAReasonNotACrash) {
-  const auto dir = test::makeTempDir("corrupt-map");
+  const test::ScopedTempDir dir("corrupt-map");
   const std::string header = "# Octomap OcTree binary file\nid OcTree\nsize 1\nres 0.05\ndata\n";
   const std::pair<std::string, std::string> files[] = {
       {"deep.bt", header + std::string(200000, '\xff')},
@@ -271,7 +266,6 @@ TEST(MapPersistence, CorruptMapFilesAreRefusedWithAReasonNotACrash) {
       EXPECT_NE(std::string(e.what()).find(name), std::string::npos) << e.what();
     }
   }
-  fs::remove_all(dir);
 }
 
 }  // namespace

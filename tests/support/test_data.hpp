@@ -27,12 +27,4 @@ inline std::string missingDataMessage(const std::string& name) {
          " (set SLAMD_DATA_DIR to the folder holding it); skipping";
 }
 
-/// A fresh empty temporary directory for one test.
-inline std::filesystem::path makeTempDir(const std::string& tag) {
-  std::string pattern =
-      (std::filesystem::temp_directory_path() / ("slamd-" + tag + "-XXXXXX")).string();
-  if (mkdtemp(pattern.data()) == nullptr) throw std::runtime_error("mkdtemp failed");
-  return pattern;
-}
-
 }  // namespace slamd::test

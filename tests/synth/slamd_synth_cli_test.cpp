@@ -8,6 +8,7 @@
 #include <string>
 
 #include "slamd/common/trajectory.hpp"
+#include "scoped_temp_dir.hpp"
 #include "test_data.hpp"
 
 namespace slamd {
@@ -31,7 +32,7 @@ int countLines(const std::filesystem::path& path) {
 }
 
 TEST(SlamdSynthProgram, WritesATumFolderWithTheRequestedFrames) {
-  const auto dir = test::makeTempDir("synth-cli");
+  const test::ScopedTempDir dir("synth-cli");
   ASSERT_EQ(run("--scene room --trajectory robot --frames 4 --seed 3 --out " + dir.string()), 0);
   EXPECT_EQ(countLines(dir / "rgb.txt"), 4);
   EXPECT_EQ(countLines(dir / "depth.txt"), 4);
@@ -41,17 +42,15 @@ TEST(SlamdSynthProgram, WritesATumFolderWithTheRequestedFrames) {
   EXPECT_EQ(std::distance(std::filesystem::directory_iterator(dir / "depth"),
                           std::filesystem::directory_iterator()),
             4);
-  std::filesystem::remove_all(dir);
 }
 
 TEST(SlamdSynthProgram, ReportsBadScenesValuesAndFoldersWithDistinctExitCodes) {
-  const auto dir = test::makeTempDir("synth-cli");
+  const test::ScopedTempDir dir("synth-cli");
   EXPECT_EQ(run("--scene castle --frames 1 --out " + dir.string()), 4);
   EXPECT_EQ(run("--scene room --frames -3 --out " + dir.string()), 3);
   EXPECT_EQ(run("--scene room --trajectory spiral --out " + dir.string()), 3);
   EXPECT_EQ(run("--scene room --frames 1 --out /proc/slamd-no-such-dir"), 5);
   EXPECT_EQ(run("--scene room"), 2);
-  std::filesystem::remove_all(dir);
 }
 
 #endif

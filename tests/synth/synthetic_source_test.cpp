@@ -7,6 +7,7 @@
 #include "slamd/synth/synthetic_source.hpp"
 #include "slamd/synth/tum_writer.hpp"
 #include "synth_test_support.hpp"
+#include "scoped_temp_dir.hpp"
 #include "test_data.hpp"
 
 namespace slamd {
@@ -141,7 +142,7 @@ TEST(SyntheticSource, ABlackoutCoversExactlyTheFramesInItsInterval) {
 }
 
 TEST(SyntheticSource, AWrittenSequenceReadBackByTheTumSourceGivesIdenticalFramesAndPoses) {
-  const auto dir = test::makeTempDir("synth-tum");
+  const test::ScopedTempDir dir("synth-tum");
   auto source = test::makeSyntheticSource("corridor", {"synthetic.frames=5"});
   const Trajectory gt = *source->groundTruth();
   std::vector<RgbdFramePtr> written;
@@ -194,7 +195,6 @@ TEST(SyntheticSource, AWrittenSequenceReadBackByTheTumSourceGivesIdenticalFrames
                                gt[i].T_world_camera.linear()),
               1e-8);
   }
-  std::filesystem::remove_all(dir);
 }
 
 TEST(TumSequenceWriter, WritesTimestampsAsTheBenchmarkDoes) {

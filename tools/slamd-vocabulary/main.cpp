@@ -7,6 +7,9 @@
 //       --out fr2.voc
 //   slamd-vocabulary --check fr2.voc
 //
+// The build runs `slamd-vocabulary --images 20 --out <build>/share/slamd/orb_vocabulary.voc`:
+// the vocabulary the daemon loads when backend.vocabulary_file is empty.
+//
 // Training images: every --every-th frame of the source (at most --images of them); features
 // from tracking's front end as configured (tracking.*, the ORB front end). Tree shape from
 // backend.vocabulary_branching / backend.vocabulary_depth. Train on a place other than the one
@@ -30,6 +33,7 @@
 #include "slamd/sources/create_frame_source.hpp"
 #include "slamd/tracking/features.hpp"
 #include "slamd/tracking/tracking_config.hpp"
+#include "vocabulary_training.hpp"
 
 using namespace slamd;
 

@@ -15,6 +15,7 @@
 #include "slamd/common/rgbd_frame.hpp"
 #include "slamd/filter/pose_ekf.hpp"
 #include "slamd/filter/vanishing_point_detector.hpp"
+#include "slamd/filter/vanishing_point_filter.hpp"
 #include "slamd/tracking/visual_odometry.hpp"
 
 namespace slamd {
@@ -42,12 +43,6 @@ struct TrackedPacket {
 struct VanishingPointPacket {
   Utime utime = 0;  ///< capture time of the frame it was detected in
   VanishingPoint detection;
-};
-
-/// A vanishing point found in a frame and what the filter did with it.
-struct VanishingPointReport {
-  VanishingPoint detection;
-  VpUpdateResult update;
 };
 
 /// filter -> publisher, mapping

@@ -1,6 +1,7 @@
 #pragma once
-// SlamDaemon: the slamd program. Wires the capture, tracking, filter, publishing and mapping
-// stages with the pipeline runner (one thread each, bounded lock-free queues between them),
+// SlamDaemon: the slamd program. Wires the capture, tracking, filter, publishing, mapping and
+// back-end stages with the pipeline runner (one thread each, bounded lock-free queues between
+// them),
 // speaks LCM to the rest of the robot, and runs until the source ends, a SHUTDOWN command arrives
 // or the process is signalled.
 //
@@ -14,7 +15,8 @@
 // filter, publish, mapping, back end) with no threads inside; slam_daemon.cpp builds the steps and
 // wires them in one table (stage, input, edge capacity and policy, thread niceness).
 //
-// Threads: one per stage, owned by the pipeline; the LCM bus has its own receive thread (commands
+// Threads: one per stage, owned by the pipeline (the back end with backend.enabled; vanishing-point
+// detection with daemon.vanishing_point_thread and the filter on); the LCM bus has its own receive thread (commands
 // only: it pushes them into a queue); the calling thread runs the control loop (commands, 1 Hz
 // status) and, after the pipeline has stopped, writes outputs. RESET travels through the queues
 // with the frames, so every stage resets at the same point of the stream.

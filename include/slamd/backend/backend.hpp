@@ -9,7 +9,7 @@
 //     BackendUpdate u = backend.addKeyframe(r.keyframe);
 //     if (u.optimized) {
 //       // corrected keyframe poses for the map rebuild; correction for the live pose:
-//       for (auto& [id, T_world_kf] : u.corrected_poses) mapper.setKeyframePose(id, T_world_kf);
+//       mapper.rebuild(u.corrected_poses);   // re-integrates the kept keyframe clouds
 //       T_world_camera_corrected = u.T_world_odometry * T_world_camera_odometry;
 //     }
 //

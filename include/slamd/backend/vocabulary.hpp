@@ -102,15 +102,23 @@ class VocabularyError : public std::runtime_error {
 
 struct BackendConfig;
 
-/// Trains a vocabulary on ORB descriptors (tracking's default extractor) of `num_images` frames
-/// evenly spread over one of slamd's synthetic scenes (room, corridor, corridor_loop; default
-/// synthetic settings). Deterministic.
-Vocabulary trainVocabularyOnSyntheticScene(const std::string& scene, int branching, int depth,
-                                           int num_images = 20);
+/// Where the vocabulary built with slamd lives, relative to the program's folder: the build
+/// writes it to <build>/share/slamd/, `cmake --install` to <prefix>/share/slamd/ (slamd-vocabulary
+/// trains it; tools/slamd-vocabulary/CMakeLists.txt).
+inline constexpr const char* kVocabularyInstallDir = "share/slamd";
+inline constexpr const char* kVocabularyFileName = "orb_vocabulary.voc";
 
-/// The daemon's vocabulary: loaded from backend.vocabulary_file when set (throws
-/// VocabularyError when it cannot be read), else trained on the synthetic room with
-/// backend.vocabulary_branching / vocabulary_depth. Logs which, and how long it took.
-std::shared_ptr<const Vocabulary> loadOrTrainVocabulary(const BackendConfig& config);
+/// <folder of the running program>/../share/slamd/orb_vocabulary.voc.
+std::string defaultVocabularyPath();
+
+/// The daemon's vocabulary, read from backend.vocabulary_file, or defaultVocabularyPath() when
+/// that is empty. Never trains (training renders a scene: slamd-vocabulary does it at build
+/// time). Throws VocabularyError naming the file when it is missing, corrupt or empty.
+std::shared_ptr<const Vocabulary> loadVocabulary(const BackendConfig& config);
+
+/// The former name of loadVocabulary(), kept until slam_daemon.cpp's stage refactor lands.
+inline std::shared_ptr<const Vocabulary> loadOrTrainVocabulary(const BackendConfig& config) {
+  return loadVocabulary(config);
+}
 
 }  // namespace slamd

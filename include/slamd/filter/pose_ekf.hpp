@@ -33,13 +33,9 @@
 //   h(x) = pi(K R^T d),   pi([x y z]) = [x/z, y/z]   (pixels, independent of the translation),
 // with Jacobians, for d_c = R^T d and J_pi = [fx/z 0 -fx x/z^2; 0 fy/z -fy y/z^2]:
 //   dh/ddtheta = J_pi [d_c]x,   dh/ddl = J_pi R^T B(d),   dh/ddt = 0.
-// How this differs from paper 002: the paper models the vanishing point as the image of a 3D point
-// placed at a large but finite distance, h = pi(K R^T (p_far - t)). That needs an arbitrary
-// distance, leaks a spurious dependence on translation (a sideways move of b metres shifts the
-// predicted point by about f b / Z pixels, which the filter then "corrects" by rotating), and keeps
-// a 3-DoF landmark whose depth is unobservable. The point at infinity is exact for parallel lines:
-// it observes only rotation (two DoF per direction: the rotation about d itself is unobservable
-// from one direction), has no translation Jacobian, and a 2-DoF landmark.
+// Paper 002 uses a far but finite 3D point instead; the point at infinity is exact for parallel
+// lines and observes only rotation (two DoF per direction: the rotation about d itself is
+// unobservable from one direction), with no translation Jacobian (docs/filter.md says why).
 //
 // Gating and association: every landmark whose axis projects in front of the image plane is a
 // candidate; the innovation covariance S = H P H^T + R gives the NIS nu^T S^-1 nu; the landmark
@@ -53,17 +49,13 @@
 // landmark_min_separation_deg): they are gated as usual and never move the pose (kProbation), but
 // those inside the gate refine the landmark's own direction (a Schmidt update: only its rows of
 // the gain are kept), so that the landmark does not keep the error of the one detection it was
-// created from (rendered corridor seed 42: a -0.77 px first detection left the pitch 0.06 deg off
-// for the whole walk); if the median of their NIS is at most landmark_consistency_chi2 it becomes active, otherwise it is
-// retired. An active landmark whose last landmark_window detections have a median NIS above
-// landmark_consistency_chi2 is retired too. Retiring removes the landmark from the state
-// (marginalisation: its rows and columns are dropped) and blocks its direction for new landmarks
-// for landmark_retry_calls calls (then it may start a new probation).
-// Why: in cluttered scenes (TUM fr1/xyz, a desk) detections of a real direction scatter by a
-// degree or two, far more than their residual covariance claims; a landmark initialised from one
-// of them pulls the pose towards its own error. Such landmarks are gated most of the time (fr1/xyz:
-// 96% of comparisons), a corridor's rarely (4%), so these statistics tell them apart before they
-// do harm.
+// created from; if the median of their NIS is at most landmark_consistency_chi2 it becomes
+// active, otherwise it is retired. An active landmark whose last landmark_window detections have
+// a median NIS above landmark_consistency_chi2 is retired too. Retiring removes the landmark from
+// the state (marginalisation: its rows and columns are dropped) and blocks its direction for new
+// landmarks for landmark_retry_calls calls (then it may start a new probation).
+// Why: in cluttered scenes detections of a real direction scatter far more than their covariance
+// claims, and such landmarks are gated most of the time, a corridor's rarely (docs/filter.md).
 // Re-anchoring (filter.reanchor_detections): an odometry increment that jumps (a wrong match set,
 // a bridged failure) with an over-confident covariance moves the pose away from an established
 // landmark, and every later detection is gated although they all agree with each other. When the
@@ -74,8 +66,7 @@
 // replaced by one at the wrong pose. The widening has the shape of the latest odometry increment's
 // noise (G Q G^T with the rotation about the direction projected out, its rotation block
 // normalised to sigma^2 per observable axis): a wrong increment turns and shifts the camera
-// together, so the translation is corrected with the rotation. Widening the rotation alone left
-// a 2.5 cm sideways error behind a 0.55 deg jump (rendered corridor, seed 43, orb). The rotation
+// together, so the translation is corrected with the rotation (docs/filter.md). The rotation
 // about the direction itself, which no vanishing point observes, is not widened.
 // Covariance updates use the Joseph form (I - KH) P (I - KH)^T + K R K^T.
 // Reset: after an update moves the rotation by dtheta (R' = R exp(dtheta)), the rotation block of
@@ -83,12 +74,10 @@
 // the world frame. The usual first-order reset e' = J_r(dtheta) e turns the covariance by only half
 // of dtheta. That matters when one direction pins two rotation axes of a large prior (after a lost
 // frame): the posterior is a narrow "cigar" along the unobservable rotation about d, whose
-// direction in body coordinates, R^T d, turns by the whole dtheta. Turned by half, the cigar
-// leaked into the next update's observable axes and a 0.3 px innovation rolled the camera by
-// 2.6 deg about the corridor (rendered corridor, texture 0.05, seed 44, orb: filter RMS roll
-// 2.38 deg against odometry's 0.55 deg; with the world-frame reset 0.70 deg). This is the
-// invariant-EKF choice: the unobservable direction of a world-direction measurement does not
-// depend on the estimate.
+// direction in body coordinates, R^T d, turns by the whole dtheta; turned by half, it leaks into
+// the next update's observable axes (measured in docs/filter.md). This is the invariant-EKF
+// choice: the unobservable direction of a world-direction measurement does not depend on the
+// estimate.
 //
 // Plane axes (updateDirection, from SurfaceAxisDetector: Manhattan directions told apart by depth
 // normals). A measured unoriented unit axis m in the camera frame, with covariance Sigma (rad^2) in

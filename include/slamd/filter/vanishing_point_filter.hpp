@@ -52,6 +52,12 @@ struct FilterInput {
   std::optional<VanishingPoint> detection;
 };
 
+/// A vanishing point found in a frame and what the filter did with it (published on LCM).
+struct VanishingPointReport {
+  VanishingPoint detection;
+  VpUpdateResult update;
+};
+
 struct FilterOutput {
   PoseEstimate pose;  ///< filtered T_world_camera with its 6x6 covariance
   EkfPredictStatus predict_status = EkfPredictStatus::kOk;

@@ -1,8 +1,10 @@
 #pragma once
-// LCM messages for the daemon's odometry and vanishing-point results.
+// Conversions from tracking's odometry and the filter's vanishing points to the messages slamd
+// publishes (SLAMD_ODOMETRY, SLAMD_VANISHING_POINT).
 
-#include "slamd/app/packets.hpp"
+#include "slamd/filter/vanishing_point_filter.hpp"
 #include "slamd/odometry_t.hpp"
+#include "slamd/tracking/visual_odometry.hpp"
 #include "slamd/vanishing_point_t.hpp"
 
 namespace slamd {

@@ -1,4 +1,4 @@
-#include "slamd/app/daemon_messages.hpp"
+#include "slamd/comms/odometry_codec.hpp"
 
 namespace slamd {
 
@@ -32,7 +32,9 @@ slamd::vanishing_point_t toVanishingPointMessage(Utime utime, const VanishingPoi
   msg.pixel[0] = report.detection.pixel.x();
   msg.pixel[1] = report.detection.pixel.y();
   for (int r = 0; r < 2; ++r) {
-    for (int c = 0; c < 2; ++c) msg.pixel_covariance[r * 2 + c] = report.detection.pixel_covariance(r, c);
+    for (int c = 0; c < 2; ++c) {
+      msg.pixel_covariance[r * 2 + c] = report.detection.pixel_covariance(r, c);
+    }
   }
   for (int i = 0; i < 3; ++i) msg.direction_camera[i] = report.detection.direction_camera[i];
   msg.num_supporting_lines = report.detection.num_supporting_lines;
