@@ -150,7 +150,7 @@ struct SlamDaemon::Impl {
     if (backend_config.enabled) {
       std::shared_ptr<const Vocabulary> vocabulary;
       try {
-        vocabulary = loadOrTrainVocabulary(backend_config);
+        vocabulary = loadVocabulary(backend_config);
       } catch (const VocabularyError& e) {
         throw ConfigError(std::string("backend.vocabulary_file: ") + e.what());
       }

@@ -22,21 +22,31 @@ enum SignalIndex { kYawJitter, kPitchJitter, kRollJitter, kPosX, kPosY, kPosZ, k
 
 }  // namespace
 
+namespace {
+
+struct MotionKindName {
+  MotionKind kind;
+  const char* name;
+};
+constexpr MotionKindName kMotionKindNames[] = {{MotionKind::kZigzag, "zigzag"},
+                                               {MotionKind::kRandom, "random"},
+                                               {MotionKind::kRobot, "robot"},
+                                               {MotionKind::kLoop, "loop"}};
+
+}  // namespace
+
 MotionKind parseMotionKind(const std::string& name) {
-  if (name == "zigzag") return MotionKind::kZigzag;
-  if (name == "random") return MotionKind::kRandom;
-  if (name == "robot") return MotionKind::kRobot;
-  if (name == "loop") return MotionKind::kLoop;
-  throw std::invalid_argument("unknown trajectory '" + name +
-                              "' (allowed: zigzag, random, robot, loop)");
+  std::string allowed;
+  for (const MotionKindName& entry : kMotionKindNames) {
+    if (name == entry.name) return entry.kind;
+    allowed += (allowed.empty() ? "" : ", ") + std::string(entry.name);
+  }
+  throw std::invalid_argument("unknown trajectory '" + name + "' (allowed: " + allowed + ")");
 }
 
 const char* motionKindName(MotionKind kind) {
-  switch (kind) {
-    case MotionKind::kZigzag: return "zigzag";
-    case MotionKind::kRandom: return "random";
-    case MotionKind::kRobot: return "robot";
-    case MotionKind::kLoop: return "loop";
+  for (const MotionKindName& entry : kMotionKindNames) {
+    if (entry.kind == kind) return entry.name;
   }
   return "?";
 }

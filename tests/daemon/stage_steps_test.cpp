@@ -105,7 +105,7 @@ TEST_F(DaemonStageSteps, NoPacketFromBeforeAResetIsProcessedAfterAStageReset) {
   const MappingConfig mapping_config = MappingConfig::load(config_);
   const BackendConfig backend_config = BackendConfig::load(config_);
   Mapper mapper(mapping_config);
-  BackendStage backend(backend_config, loadOrTrainVocabulary(backend_config));
+  BackendStage backend(backend_config, loadVocabulary(backend_config));
   RecordingPublisher publisher;
   SpscQueue<PoseCorrection> pose_corrections(64);
   SpscQueue<MapCorrection> map_corrections(64);

@@ -4,27 +4,22 @@
 //   odd   a bare SAVE_MAP argument, resolved directly (reaches the name rules faster).
 // The save directory exists (a fresh temporary folder), so resolution reaches the filesystem.
 
-#include <unistd.h>
-
 #include <cstdlib>
 #include <filesystem>
 #include <string>
 
+#include "../support/scoped_temp_dir.hpp"
 #include "fuzz_input.hpp"
 #include "slamd/app/command_save_path.hpp"
 #include "slamd/comms/message_codec.hpp"
 
 namespace {
 
+// Removed at normal exit by the static's destructor (libFuzzer ends with exit()).
 const std::string& saveDirectory() {
-  static const std::string directory = [] {
-    std::string pattern =
-        (std::filesystem::temp_directory_path() / "slamd-fuzz-commands-XXXXXX").string();
-    const char* made = ::mkdtemp(pattern.data());
-    if (made == nullptr) std::abort();
-    return std::string(made);
-  }();
-  return directory;
+  static const slamd::test::ScopedTempDir directory("fuzz-commands");
+  static const std::string path = directory.path().string();
+  return path;
 }
 
 void checkResolution(const std::string& argument) {

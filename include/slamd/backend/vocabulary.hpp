@@ -116,9 +116,4 @@ std::string defaultVocabularyPath();
 /// time). Throws VocabularyError naming the file when it is missing, corrupt or empty.
 std::shared_ptr<const Vocabulary> loadVocabulary(const BackendConfig& config);
 
-/// The former name of loadVocabulary(), kept until slam_daemon.cpp's stage refactor lands.
-inline std::shared_ptr<const Vocabulary> loadOrTrainVocabulary(const BackendConfig& config) {
-  return loadVocabulary(config);
-}
-
 }  // namespace slamd

@@ -75,10 +75,11 @@ struct OdometryStats {
   double time_total_ms = 0.0;
 };
 
-/// The result of one processFrame(). Mapping to slamd.odometry_t: utime; prev_utime = ref_utime;
-/// translation/rotation = T_ref_curr; covariance = covariance_ref_curr; status; num_features,
+/// The result of one processFrame(). Published as slamd.odometry_t (comms/odometry_codec.cpp):
+/// utime, prev_utime; translation/rotation = T_prev_curr; covariance; status; num_features,
 /// num_matches, num_inliers, reprojection_error_px from stats; is_keyframe;
-/// reference_keyframe_id. The filter's prediction uses T_prev_curr and covariance (frame to frame).
+/// reference_keyframe_id. The filter's prediction uses the same frame-to-frame T_prev_curr and
+/// covariance; T_ref_curr and covariance_ref_curr are the raw measurement, for the back end.
 struct OdometryResult {
   Utime utime = 0;
   std::int64_t sequence = 0;
