@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <optional>
 
 #include <opencv2/imgproc.hpp>
 
@@ -554,51 +555,69 @@ KeyframePtr VisualOdometry::makeKeyframe(const CurrentFrame& curr, const RgbdFra
   return kf;
 }
 
-OdometryResult VisualOdometry::process(const RgbdFrame& frame, const RgbdFramePtr& frame_ptr) {
-  const std::int64_t t_start = steadyNowNs();
-  OdometryResult res;
-  res.utime = frame.utime;
-  res.sequence = frame.sequence;
-  res.prev_utime = prev_utime_;
+// --- one frame, step by step ----------------------------------------------------------------
+// process() reads top to bottom: prepare the frame, start a segment or measure it against the
+// keyframe (the previous frame as fallback), re-use a nearby keyframe or refine in the local
+// window, then make a keyframe if needed. Every exit goes through commit(), which makes the frame
+// the "previous frame" of the next call.
 
-  // Failure path: constant-velocity prediction for a short gap, then LOST.
-  auto fail = [&](OdometryStatus status, std::shared_ptr<FeatureSet> features) {
-    res.status = status;
-    res.segment = segment_;
-    if (state_ == TrackingState::kNotInitialized) {
-      res.tracking_state = TrackingState::kNotInitialized;
-      res.T_world_camera = T_world_prev_;
-      res.covariance = Matrix6d::Identity() * kLostCovariance;
-    } else if (state_ != TrackingState::kLost &&
-               failed_frames_ < config_.max_predicted_frames) {
-      ++failed_frames_;
-      const SE3 motion = have_velocity_ ? velocity_prev_curr_ : SE3::Identity();
-      res.T_prev_curr = motion;
-      res.T_world_camera = normalizedSE3(T_world_prev_ * motion);
-      const double s = config_.failure_sigma_scale;
-      res.covariance = last_covariance_ * (s * s);
-      state_ = TrackingState::kPredicted;
-      res.tracking_state = state_;
-    } else {
-      // LOST: hold the last pose; the next trackable frame starts a new segment there.
-      state_ = TrackingState::kLost;
-      res.tracking_state = state_;
-      res.T_world_camera = T_world_prev_;
-      res.covariance = Matrix6d::Identity() * kLostCovariance;
-      keyframe_.reset();
-      have_velocity_ = false;
-    }
-    res.covariance_ref_curr = res.covariance;
-    res.T_ref_curr = res.T_prev_curr;
-    res.ref_utime = prev_utime_;
-    T_world_prev_ = res.T_world_camera;
-    prev_utime_ = frame.utime;
-    prev_features_ = std::move(features);
-    prev_tracked_ = false;
-    res.stats.time_total_ms = msSince(t_start);
-    return res;
-  };
+struct VisualOdometry::ReferenceMeasurement {
+  TrackAttempt attempt;
+  SE3 T_world_ref = SE3::Identity();
+  Utime ref_utime = 0;
+  std::int64_t ref_id = -1;    ///< -1 when measured from the previous frame
+  bool from_previous = false;  ///< the keyframe failed; the previous frame served
+};
 
+OdometryResult VisualOdometry::commit(OdometryResult res,
+                                      std::shared_ptr<const FeatureSet> features, bool tracked,
+                                      std::int64_t t_start) {
+  T_world_prev_ = res.T_world_camera;
+  prev_utime_ = res.utime;
+  prev_features_ = std::move(features);
+  prev_tracked_ = tracked;
+  res.stats.time_total_ms = msSince(t_start);
+  return res;
+}
+
+OdometryResult VisualOdometry::fail(OdometryResult res, OdometryStatus status,
+                                    std::shared_ptr<const FeatureSet> features,
+                                    std::int64_t t_start) {
+  // Constant-velocity prediction for a short gap, then LOST.
+  res.status = status;
+  res.segment = segment_;
+  if (state_ == TrackingState::kNotInitialized) {
+    res.tracking_state = TrackingState::kNotInitialized;
+    res.T_world_camera = T_world_prev_;
+    res.covariance = Matrix6d::Identity() * kLostCovariance;
+  } else if (state_ != TrackingState::kLost && failed_frames_ < config_.max_predicted_frames) {
+    ++failed_frames_;
+    const SE3 motion = have_velocity_ ? velocity_prev_curr_ : SE3::Identity();
+    res.T_prev_curr = motion;
+    res.T_world_camera = normalizedSE3(T_world_prev_ * motion);
+    const double s = config_.failure_sigma_scale;
+    res.covariance = last_covariance_ * (s * s);
+    state_ = TrackingState::kPredicted;
+    res.tracking_state = state_;
+  } else {
+    // LOST: hold the last pose; the next trackable frame starts a new segment there.
+    state_ = TrackingState::kLost;
+    res.tracking_state = state_;
+    res.T_world_camera = T_world_prev_;
+    res.covariance = Matrix6d::Identity() * kLostCovariance;
+    keyframe_.reset();
+    have_velocity_ = false;
+  }
+  res.covariance_ref_curr = res.covariance;
+  res.T_ref_curr = res.T_prev_curr;
+  res.ref_utime = prev_utime_;
+  return commit(std::move(res), std::move(features), false, t_start);
+}
+
+std::optional<OdometryStatus> VisualOdometry::prepareFrame(const RgbdFrame& frame,
+                                                           const RgbdFramePtr& frame_ptr,
+                                                           CurrentFrame& curr, cv::Mat& small,
+                                                           OdometryStats& stats) {
   // Validate the input: never throw, report a status.
   cv::Mat gray;
   if (!frame.gray.empty() && frame.gray.type() == CV_8UC1) {
@@ -606,19 +625,18 @@ OdometryResult VisualOdometry::process(const RgbdFrame& frame, const RgbdFramePt
   } else if (!frame.color_bgr.empty() && frame.color_bgr.type() == CV_8UC3) {
     cv::cvtColor(frame.color_bgr, gray, cv::COLOR_BGR2GRAY);
   }
-  CameraIntrinsics K = frame.intrinsics;
+  const CameraIntrinsics& K = frame.intrinsics;
   if (gray.empty() || !K.validationError().empty() || gray.cols != K.width ||
       gray.rows != K.height || gray.cols < 32 || gray.rows < 32) {
-    return fail(OdometryStatus::kInsufficientFeatures, nullptr);
+    return OdometryStatus::kInsufficientFeatures;
   }
   if (frame.depth_m.empty() || frame.depth_m.type() != CV_32FC1 ||
       frame.depth_m.size() != gray.size()) {
-    return fail(OdometryStatus::kNoDepth, nullptr);
+    return OdometryStatus::kNoDepth;
   }
 
   // Features.
-  std::int64_t t0 = steadyNowNs();
-  CurrentFrame curr;
+  const std::int64_t t0 = steadyNowNs();
   curr.K = K;
   curr.depth_m = frame.depth_m;
   curr.features = std::make_shared<FeatureSet>();
@@ -639,7 +657,6 @@ OdometryResult VisualOdometry::process(const RgbdFrame& frame, const RgbdFramePt
     }
   }
   curr.buildGrid();
-  cv::Mat small;
   if (config_.useRotationPrior()) {
     cv::Mat tmp = gray;
     while (tmp.cols > 100) {
@@ -650,174 +667,217 @@ OdometryResult VisualOdometry::process(const RgbdFrame& frame, const RgbdFramePt
     tmp.convertTo(small, CV_32F);
     cv::GaussianBlur(small, small, cv::Size(3, 3), 0.0);
   }
-  res.stats.time_features_ms = msSince(t0);
-  res.stats.num_features = static_cast<int>(curr.features->size());
-  res.stats.num_features_with_depth = curr.features->num_with_depth;
+  stats.time_features_ms = msSince(t0);
+  stats.num_features = static_cast<int>(curr.features->size());
+  stats.num_features_with_depth = curr.features->num_with_depth;
   if (curr.features->num_with_depth < config_.min_features) {
     const bool no_depth = curr.features->size() >= static_cast<std::size_t>(config_.min_features);
-    prev_small_ = small;
-    return fail(no_depth ? OdometryStatus::kNoDepth : OdometryStatus::kInsufficientFeatures,
-                curr.features);
+    return no_depth ? OdometryStatus::kNoDepth : OdometryStatus::kInsufficientFeatures;
   }
+  return std::nullopt;
+}
 
+OdometryResult VisualOdometry::startSegment(OdometryResult res, const CurrentFrame& curr,
+                                            const RgbdFrame& frame, const RgbdFramePtr& frame_ptr,
+                                            std::int64_t t_start) {
   // First frame, or first after LOST: a new keyframe (and segment) at the last pose.
-  if (!keyframe_) {
-    if (state_ == TrackingState::kLost) ++segment_;
-    const SE3 T_world_curr = T_world_prev_;
-    keyframe_ = makeKeyframe(curr, frame, frame_ptr, T_world_curr);
-    recent_keyframes_.clear();
-    recent_keyframes_.push_back(keyframe_);
-    res.status = OdometryStatus::kOk;
-    res.tracking_state = TrackingState::kOk;
-    res.T_world_camera = T_world_curr;
-    res.covariance = Matrix6d::Identity() * (state_ == TrackingState::kNotInitialized ? 0.0 : kLostCovariance);
-    res.covariance_ref_curr = res.covariance;
-    res.ref_utime = frame.utime;
-    res.reference_keyframe_id = keyframe_->id;
-    res.is_keyframe = true;
-    res.keyframe = keyframe_;
-    res.segment = segment_;
-    state_ = TrackingState::kOk;
-    failed_frames_ = 0;
-    have_velocity_ = false;
-    T_world_prev_ = T_world_curr;
-    prev_utime_ = frame.utime;
-    prev_features_ = curr.features;
-    prev_tracked_ = true;
-    prev_small_ = small;
-    res.stats.time_total_ms = msSince(t_start);
-    return res;
-  }
+  if (state_ == TrackingState::kLost) ++segment_;
+  const SE3 T_world_curr = T_world_prev_;
+  keyframe_ = makeKeyframe(curr, frame, frame_ptr, T_world_curr);
+  recent_keyframes_.clear();
+  recent_keyframes_.push_back(keyframe_);
+  res.status = OdometryStatus::kOk;
+  res.tracking_state = TrackingState::kOk;
+  res.T_world_camera = T_world_curr;
+  res.covariance = Matrix6d::Identity() *
+                   (state_ == TrackingState::kNotInitialized ? 0.0 : kLostCovariance);
+  res.covariance_ref_curr = res.covariance;
+  res.ref_utime = frame.utime;
+  res.reference_keyframe_id = keyframe_->id;
+  res.is_keyframe = true;
+  res.keyframe = keyframe_;
+  res.segment = segment_;
+  state_ = TrackingState::kOk;
+  failed_frames_ = 0;
+  have_velocity_ = false;
+  return commit(std::move(res), curr.features, true, t_start);
+}
 
-  // Motion prior: constant velocity (FOVIS: rotation from image alignment).
+SE3 VisualOdometry::predictMotion(const cv::Mat& small, const CameraIntrinsics& K) {
+  // Constant velocity (FOVIS: rotation from image alignment against the previous frame).
   SE3 motion_prior = have_velocity_ ? velocity_prev_curr_ : SE3::Identity();
   if (config_.useRotationPrior()) {
     const SE3 rotation = alignRotation(small, K);
     motion_prior.linear() = rotation.linear();
   }
   prev_small_ = small;
-  const SE3 T_world_pred = T_world_prev_ * motion_prior;
+  return motion_prior;
+}
 
-  TrackAttempt attempt =
+VisualOdometry::ReferenceMeasurement VisualOdometry::measureAgainstReference(
+    const SE3& T_world_pred, const CurrentFrame& curr) {
+  ReferenceMeasurement m;
+  m.attempt =
       track(keyframe_->features, keyframe_->T_world_camera.inverse() * T_world_pred, true, curr);
-  SE3 T_world_ref = keyframe_->T_world_camera;
-  Utime ref_utime = keyframe_->utime;
-  std::int64_t ref_id = keyframe_->id;
-  bool from_previous = false;
-  if (attempt.status != OdometryStatus::kOk && prev_features_ && prev_tracked_ &&
+  m.T_world_ref = keyframe_->T_world_camera;
+  m.ref_utime = keyframe_->utime;
+  m.ref_id = keyframe_->id;
+  if (m.attempt.status != OdometryStatus::kOk && prev_features_ && prev_tracked_ &&
       prev_utime_ != keyframe_->utime) {
     TrackAttempt fallback =
         track(*prev_features_, T_world_prev_.inverse() * T_world_pred, true, curr);
-    fallback.time_matching_ms += attempt.time_matching_ms;
-    fallback.time_motion_ms += attempt.time_motion_ms;
+    fallback.time_matching_ms += m.attempt.time_matching_ms;
+    fallback.time_motion_ms += m.attempt.time_motion_ms;
     if (fallback.status == OdometryStatus::kOk) {
-      attempt = fallback;
-      T_world_ref = T_world_prev_;
-      ref_utime = prev_utime_;
-      ref_id = -1;
-      from_previous = true;
+      m.attempt = fallback;
+      m.T_world_ref = T_world_prev_;
+      m.ref_utime = prev_utime_;
+      m.ref_id = -1;
+      m.from_previous = true;
     }
   }
+  return m;
+}
+
+bool VisualOdometry::needsNewKeyframe(const TrackAttempt& attempt, const Keyframe& kf) const {
+  const double overlap =
+      static_cast<double>(attempt.num_inliers) / std::max(1, kf.features.num_with_depth);
+  const double translation_m = attempt.T_ref_curr.translation().norm();
+  const double rotation_deg = rotationAngleRad(attempt.T_ref_curr.linear()) * 180.0 / M_PI;
+  return attempt.num_inliers < config_.keyframe_min_inliers ||
+         overlap < config_.keyframe_min_overlap ||
+         translation_m > config_.keyframe_max_translation_m ||
+         rotation_deg > config_.keyframe_max_rotation_deg;
+}
+
+bool VisualOdometry::reuseRecentKeyframe(const CurrentFrame& curr, TrackAttempt& attempt,
+                                         SE3& T_world_curr, OdometryResult& res) {
+  // Before making a keyframe, try the recent keyframes near the current pose: re-using one
+  // (the camera came back) measures against it directly instead of chaining more drift.
+  std::vector<std::pair<double, KeyframePtr>> candidates;
+  for (const KeyframePtr& kf : recent_keyframes_) {
+    if (kf == keyframe_) continue;
+    const SE3 T_kf_curr = kf->T_world_camera.inverse() * T_world_curr;
+    const double translation_m = T_kf_curr.translation().norm();
+    const double rotation_deg = rotationAngleRad(T_kf_curr.linear()) * 180.0 / M_PI;
+    if (translation_m > 0.5 * config_.keyframe_max_translation_m ||
+        rotation_deg > 0.5 * config_.keyframe_max_rotation_deg) {
+      continue;
+    }
+    candidates.emplace_back(translation_m / config_.keyframe_max_translation_m +
+                                rotation_deg / config_.keyframe_max_rotation_deg,
+                            kf);
+  }
+  std::sort(candidates.begin(), candidates.end(),
+            [](const auto& a, const auto& b) { return a.first < b.first; });
+  for (std::size_t k = 0; k < candidates.size() && k < 2; ++k) {
+    const KeyframePtr& kf = candidates[k].second;
+    const TrackAttempt reuse =
+        track(kf->features, kf->T_world_camera.inverse() * T_world_curr, true, curr);
+    res.stats.time_matching_ms += reuse.time_matching_ms;
+    res.stats.time_motion_ms += reuse.time_motion_ms;
+    if (reuse.status == OdometryStatus::kOk && !needsNewKeyframe(reuse, *kf)) {
+      keyframe_ = kf;
+      attempt = reuse;
+      T_world_curr = normalizedSE3(kf->T_world_camera * reuse.T_ref_curr);
+      res.reference_keyframe_id = kf->id;
+      res.ref_utime = kf->utime;
+      res.stats.num_matches = reuse.num_matches;
+      res.stats.num_inliers = reuse.num_inliers;
+      res.stats.reprojection_error_px = reuse.rms_px;
+      res.T_ref_curr = reuse.T_ref_curr;
+      res.covariance_ref_curr = reuse.covariance;
+      res.covariance = reuse.covariance;
+      return true;
+    }
+  }
+  return false;
+}
+
+void VisualOdometry::refineInLocalWindow(const CurrentFrame& curr, TrackAttempt& attempt,
+                                         SE3& T_world_curr, OdometryResult& res) {
+  // The most recent other keyframes, held fixed. (The previous frame is no help: its pose is
+  // itself measured from the keyframe.)
+  std::vector<ExtraReference> extras;
+  for (auto it = recent_keyframes_.rbegin();
+       it != recent_keyframes_.rend() &&
+       static_cast<int>(extras.size()) < config_.jointReferences();
+       ++it) {
+    if (*it == keyframe_ || (*it)->utime == prev_utime_) continue;
+    extras.push_back({&(*it)->features, (*it)->T_world_camera});
+  }
+  const double matching_ms = attempt.time_matching_ms;
+  const double motion_ms = attempt.time_motion_ms;
+  refineWithExtraReferences(keyframe_->T_world_camera, extras, curr, attempt);
+  res.stats.time_matching_ms += attempt.time_matching_ms - matching_ms;
+  res.stats.time_motion_ms += attempt.time_motion_ms - motion_ms;
+  res.T_ref_curr = attempt.T_ref_curr;
+  T_world_curr = normalizedSE3(keyframe_->T_world_camera * attempt.T_ref_curr);
+}
+
+void VisualOdometry::addKeyframe(const CurrentFrame& curr, const RgbdFrame& frame,
+                                 const RgbdFramePtr& frame_ptr, const SE3& T_world_curr,
+                                 OdometryResult& res) {
+  keyframe_ = makeKeyframe(curr, frame, frame_ptr, T_world_curr);
+  res.is_keyframe = true;
+  res.keyframe = keyframe_;
+  recent_keyframes_.push_back(keyframe_);
+  while (static_cast<int>(recent_keyframes_.size()) > config_.keyframe_window) {
+    recent_keyframes_.pop_front();
+  }
+}
+
+OdometryResult VisualOdometry::process(const RgbdFrame& frame, const RgbdFramePtr& frame_ptr) {
+  const std::int64_t t_start = steadyNowNs();
+  OdometryResult res;
+  res.utime = frame.utime;
+  res.sequence = frame.sequence;
+  res.prev_utime = prev_utime_;
+
+  CurrentFrame curr;
+  cv::Mat small;
+  if (const auto failure = prepareFrame(frame, frame_ptr, curr, small, res.stats)) {
+    if (curr.features) prev_small_ = small;  // the image was usable; its features too few
+    return fail(std::move(res), *failure, curr.features, t_start);
+  }
+  if (!keyframe_) {
+    prev_small_ = small;
+    return startSegment(std::move(res), curr, frame, frame_ptr, t_start);
+  }
+
+  const SE3 T_world_pred = T_world_prev_ * predictMotion(small, curr.K);
+  ReferenceMeasurement measured = measureAgainstReference(T_world_pred, curr);
+  TrackAttempt& attempt = measured.attempt;
   res.stats.num_matches = attempt.num_matches;
   res.stats.num_inliers = attempt.num_inliers;
   res.stats.reprojection_error_px = attempt.rms_px;
   res.stats.used_guided_matching = attempt.guided;
-  res.stats.used_previous_frame = from_previous;
+  res.stats.used_previous_frame = measured.from_previous;
   res.stats.time_matching_ms = attempt.time_matching_ms;
   res.stats.time_motion_ms = attempt.time_motion_ms;
-  if (attempt.status != OdometryStatus::kOk) return fail(attempt.status, curr.features);
+  if (attempt.status != OdometryStatus::kOk) {
+    return fail(std::move(res), attempt.status, curr.features, t_start);
+  }
 
   res.status = OdometryStatus::kOk;
   res.tracking_state = TrackingState::kOk;
   res.T_ref_curr = attempt.T_ref_curr;
   res.covariance_ref_curr = attempt.covariance;
   res.covariance = attempt.covariance;
-  res.ref_utime = ref_utime;
-  res.reference_keyframe_id = ref_id;
+  res.ref_utime = measured.ref_utime;
+  res.reference_keyframe_id = measured.ref_id;
 
-  // Keyframe decision.
-  auto needsNewKeyframe = [&](const TrackAttempt& t, const Keyframe& kf) {
-    const double overlap =
-        static_cast<double>(t.num_inliers) / std::max(1, kf.features.num_with_depth);
-    const double translation_m = t.T_ref_curr.translation().norm();
-    const double rotation_deg = rotationAngleRad(t.T_ref_curr.linear()) * 180.0 / M_PI;
-    return t.num_inliers < config_.keyframe_min_inliers ||
-           overlap < config_.keyframe_min_overlap ||
-           translation_m > config_.keyframe_max_translation_m ||
-           rotation_deg > config_.keyframe_max_rotation_deg;
-  };
-  SE3 T_world_curr = normalizedSE3(T_world_ref * attempt.T_ref_curr);
-  bool new_keyframe = from_previous || needsNewKeyframe(attempt, *keyframe_);
-  if (new_keyframe && config_.keyframe_window > 1) {
-    // Before making a keyframe, try the recent keyframes near the current pose: re-using one
-    // (the camera came back) measures against it directly instead of chaining more drift.
-    std::vector<std::pair<double, KeyframePtr>> candidates;
-    for (const KeyframePtr& kf : recent_keyframes_) {
-      if (kf == keyframe_) continue;
-      const SE3 T_kf_curr = kf->T_world_camera.inverse() * T_world_curr;
-      const double translation_m = T_kf_curr.translation().norm();
-      const double rotation_deg = rotationAngleRad(T_kf_curr.linear()) * 180.0 / M_PI;
-      if (translation_m > 0.5 * config_.keyframe_max_translation_m ||
-          rotation_deg > 0.5 * config_.keyframe_max_rotation_deg) {
-        continue;
-      }
-      candidates.emplace_back(translation_m / config_.keyframe_max_translation_m +
-                                  rotation_deg / config_.keyframe_max_rotation_deg,
-                              kf);
-    }
-    std::sort(candidates.begin(), candidates.end(),
-              [](const auto& a, const auto& b) { return a.first < b.first; });
-    for (std::size_t k = 0; k < candidates.size() && k < 2; ++k) {
-      const KeyframePtr& kf = candidates[k].second;
-      const TrackAttempt reuse =
-          track(kf->features, kf->T_world_camera.inverse() * T_world_curr, true, curr);
-      res.stats.time_matching_ms += reuse.time_matching_ms;
-      res.stats.time_motion_ms += reuse.time_motion_ms;
-      if (reuse.status == OdometryStatus::kOk && !needsNewKeyframe(reuse, *kf)) {
-        keyframe_ = kf;
-        attempt = reuse;
-        T_world_curr = normalizedSE3(kf->T_world_camera * reuse.T_ref_curr);
-        res.reference_keyframe_id = kf->id;
-        res.ref_utime = kf->utime;
-        res.stats.num_matches = reuse.num_matches;
-        res.stats.num_inliers = reuse.num_inliers;
-        res.stats.reprojection_error_px = reuse.rms_px;
-        res.T_ref_curr = reuse.T_ref_curr;
-        res.covariance_ref_curr = reuse.covariance;
-        res.covariance = reuse.covariance;
-        new_keyframe = false;
-        break;
-      }
-    }
+  SE3 T_world_curr = normalizedSE3(measured.T_world_ref * attempt.T_ref_curr);
+  bool new_keyframe = measured.from_previous || needsNewKeyframe(attempt, *keyframe_);
+  if (new_keyframe && config_.keyframe_window > 1 &&
+      reuseRecentKeyframe(curr, attempt, T_world_curr, res)) {
+    new_keyframe = false;
   }
-  if (!from_previous && config_.jointReferences() > 0) {
-    // Local window: the most recent other keyframes, held fixed. (The previous frame is no help:
-    // on fr1/xyz adding it made ATE and RPE worse, its pose being measured from the keyframe.)
-    std::vector<ExtraReference> extras;
-    for (auto it = recent_keyframes_.rbegin();
-         it != recent_keyframes_.rend() &&
-         static_cast<int>(extras.size()) < config_.jointReferences();
-         ++it) {
-      if (*it == keyframe_ || (*it)->utime == prev_utime_) continue;
-      extras.push_back({&(*it)->features, (*it)->T_world_camera});
-    }
-    const double matching_ms = attempt.time_matching_ms;
-    const double motion_ms = attempt.time_motion_ms;
-    refineWithExtraReferences(keyframe_->T_world_camera, extras, curr, attempt);
-    res.stats.time_matching_ms += attempt.time_matching_ms - matching_ms;
-    res.stats.time_motion_ms += attempt.time_motion_ms - motion_ms;
-    res.T_ref_curr = attempt.T_ref_curr;
-    T_world_curr = normalizedSE3(keyframe_->T_world_camera * attempt.T_ref_curr);
+  if (!measured.from_previous && config_.jointReferences() > 0) {
+    refineInLocalWindow(curr, attempt, T_world_curr, res);
   }
-  if (new_keyframe) {
-    keyframe_ = makeKeyframe(curr, frame, frame_ptr, T_world_curr);
-    res.is_keyframe = true;
-    res.keyframe = keyframe_;
-    recent_keyframes_.push_back(keyframe_);
-    while (static_cast<int>(recent_keyframes_.size()) > config_.keyframe_window) {
-      recent_keyframes_.pop_front();
-    }
-  }
+  if (new_keyframe) addKeyframe(curr, frame, frame_ptr, T_world_curr, res);
+
   res.T_world_camera = T_world_curr;
   res.T_prev_curr = normalizedSE3(T_world_prev_.inverse() * T_world_curr);
   res.segment = segment_;
@@ -826,12 +886,7 @@ OdometryResult VisualOdometry::process(const RgbdFrame& frame, const RgbdFramePt
   last_covariance_ = attempt.covariance;
   failed_frames_ = 0;
   state_ = TrackingState::kOk;
-  T_world_prev_ = T_world_curr;
-  prev_utime_ = frame.utime;
-  prev_features_ = curr.features;
-  prev_tracked_ = true;
-  res.stats.time_total_ms = msSince(t_start);
-  return res;
+  return commit(std::move(res), curr.features, true, t_start);
 }
 
 }  // namespace slamd

@@ -25,6 +25,7 @@
 #include <cstdint>
 #include <deque>
 #include <memory>
+#include <optional>
 #include <random>
 #include <vector>
 
@@ -128,8 +129,37 @@ class VisualOdometry {
   struct TrackAttempt;
   struct CurrentFrame;
 
+  struct ReferenceMeasurement;
+
   OdometryResult guardedProcess(const RgbdFrame& frame, const RgbdFramePtr& frame_ptr);
   OdometryResult process(const RgbdFrame& frame, const RgbdFramePtr& frame_ptr);
+  // The steps of process(), in order.
+  /// Validates the frame and extracts its features (curr) and the small image for rotation
+  /// alignment; the failure status when the frame cannot be tracked (curr.features is null when
+  /// the input itself was unusable).
+  std::optional<OdometryStatus> prepareFrame(const RgbdFrame& frame, const RgbdFramePtr& frame_ptr,
+                                             CurrentFrame& curr, cv::Mat& small,
+                                             OdometryStats& stats);
+  OdometryResult startSegment(OdometryResult res, const CurrentFrame& curr, const RgbdFrame& frame,
+                              const RgbdFramePtr& frame_ptr, std::int64_t t_start);
+  /// The motion prior since the previous frame; keeps small for the next frame's alignment.
+  SE3 predictMotion(const cv::Mat& small, const CameraIntrinsics& K);
+  ReferenceMeasurement measureAgainstReference(const SE3& T_world_pred, const CurrentFrame& curr);
+  bool needsNewKeyframe(const TrackAttempt& attempt, const Keyframe& kf) const;
+  /// Measures against a recent keyframe near T_world_curr instead of making a new one; true (and
+  /// attempt, T_world_curr and res updated) when one was good enough.
+  bool reuseRecentKeyframe(const CurrentFrame& curr, TrackAttempt& attempt, SE3& T_world_curr,
+                           OdometryResult& res);
+  void refineInLocalWindow(const CurrentFrame& curr, TrackAttempt& attempt, SE3& T_world_curr,
+                           OdometryResult& res);
+  void addKeyframe(const CurrentFrame& curr, const RgbdFrame& frame, const RgbdFramePtr& frame_ptr,
+                   const SE3& T_world_curr, OdometryResult& res);
+  /// A failed frame: predicted with constant velocity for a short gap, then LOST.
+  OdometryResult fail(OdometryResult res, OdometryStatus status,
+                      std::shared_ptr<const FeatureSet> features, std::int64_t t_start);
+  /// Every exit: the frame becomes the previous frame of the next call.
+  OdometryResult commit(OdometryResult res, std::shared_ptr<const FeatureSet> features,
+                        bool tracked, std::int64_t t_start);
   void matchGuided(const FeatureSet& ref, const SE3& T_ref_curr_prior, const CurrentFrame& curr,
                    double radius_px, std::vector<Correspondence>& matches) const;
   void matchByDescriptor(const FeatureSet& ref, const CurrentFrame& curr,
