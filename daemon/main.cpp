@@ -37,7 +37,8 @@ int main(int argc, char** argv) {
                   "print every configuration key (or those of AREA: daemon, mapping, ...) with its "
                   "type, default, range, unit and doc, and exit");
   options.addFlag("json", "with --describe-config: as a JSON array");
-  options.addFlag("markdown", "with --describe-config: as Markdown tables (the README's reference)");
+  options.addFlag("markdown",
+                  "with --describe-config: as Markdown tables (the README's reference)");
   options.setPositional("[AREA]", 0, 1);
   if (!options.parse(argc, argv)) return options.exitCode();
   if (options.flag("describe-config")) {

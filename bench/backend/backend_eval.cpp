@@ -17,8 +17,8 @@
 // last line of stdout, one JSON metrics report (schema slamd.metrics/1).
 
 #include <algorithm>
-#include <cmath>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <ctime>
 #include <iostream>
@@ -38,8 +38,8 @@
 #include "slamd/eval/metrics_report.hpp"
 #include "slamd/eval/trajectory_error.hpp"
 #include "slamd/sources/create_frame_source.hpp"
-#include "vocabulary_training.hpp"
 #include "slamd/tracking/visual_odometry.hpp"
+#include "vocabulary_training.hpp"
 
 using namespace slamd;
 
@@ -99,9 +99,9 @@ void reportEdges(const Trajectory& truth, const std::vector<KeyframePtr>& keyfra
   }
   for (int k = 0; k < 4; ++k) {
     if (errors[k].empty()) continue;
-    std::printf("  %s edges: %zu, error vs truth median %.4f m, p95 %.4f m, max %.4f m\n",
-                names[k], errors[k].size(), percentileOf(errors[k], 50),
-                percentileOf(errors[k], 95), percentileOf(errors[k], 100));
+    std::printf("  %s edges: %zu, error vs truth median %.4f m, p95 %.4f m, max %.4f m\n", names[k],
+                errors[k].size(), percentileOf(errors[k], 50), percentileOf(errors[k], 95),
+                percentileOf(errors[k], 100));
   }
   std::sort(worst.rbegin(), worst.rend());
   for (std::size_t w = 0; w < std::min<std::size_t>(5, worst.size()); ++w) {
@@ -116,8 +116,8 @@ void reportEdges(const Trajectory& truth, const std::vector<KeyframePtr>& keyfra
 // A frame with no depth and a black image: tracking fails on it (for --blackout).
 RgbdFramePtr blankFrame(const RgbdFrame& frame) {
   auto blank = std::make_shared<RgbdFrame>(frame);
-  blank->depth_m = cv::Mat(frame.depth_m.size(), CV_32FC1,
-                           cv::Scalar(std::numeric_limits<float>::quiet_NaN()));
+  blank->depth_m =
+      cv::Mat(frame.depth_m.size(), CV_32FC1, cv::Scalar(std::numeric_limits<float>::quiet_NaN()));
   if (!frame.gray.empty()) blank->gray = cv::Mat::zeros(frame.gray.size(), CV_8UC1);
   if (!frame.color_bgr.empty()) blank->color_bgr = cv::Mat::zeros(frame.color_bgr.size(), CV_8UC3);
   return blank;
@@ -251,14 +251,14 @@ int main(int argc, char** argv) {
       }
       if (u.relocalization_attempted) {
         ++relocalization_attempts;
-        std::printf("frame %ld: keyframe %ld (segment %ld) relocalisation attempt %d: %s%s\n",
-                    index - 1, static_cast<long>(r.keyframe->id),
-                    static_cast<long>(r.keyframe->segment), u.relocalization_attempts,
-                    loopStatusName(u.relocalization.status),
-                    u.relocalized ? (" -> keyframe " + std::to_string(u.relocalization.match_id) +
-                                     " (" + std::to_string(u.relocalization.num_inliers) +
-                                     " inliers)").c_str()
-                                  : "");
+        std::printf(
+            "frame %ld: keyframe %ld (segment %ld) relocalisation attempt %d: %s%s\n", index - 1,
+            static_cast<long>(r.keyframe->id), static_cast<long>(r.keyframe->segment),
+            u.relocalization_attempts, loopStatusName(u.relocalization.status),
+            u.relocalized ? (" -> keyframe " + std::to_string(u.relocalization.match_id) + " (" +
+                             std::to_string(u.relocalization.num_inliers) + " inliers)")
+                                .c_str()
+                          : "");
       }
     }
     // Blank frames carry no information; they are left out of the trajectories.
@@ -302,23 +302,25 @@ int main(int argc, char** argv) {
   report.setLatencySamples("optimization", optimisation_ms);
   report.setLatencySamples("loop_detection", loop_ms);
   report.setLatencySamples("local_edges", local_ms);
-  std::printf("%s: %ld frames (%d lost), %zu keyframes, %d segments joined by relocalisation "
-              "(%d attempts), %d loops, %d local edges; graph %zu nodes, %zu edges\n",
-              spec.c_str(), index, lost_frames, keyframes.size(), backend.numRelocalizations(),
-              relocalization_attempts, backend.numLoops(), backend.numLocalEdges(),
-              backend.graph().numNodes(), backend.graph().numEdges());
+  std::printf(
+      "%s: %ld frames (%d lost), %zu keyframes, %d segments joined by relocalisation "
+      "(%d attempts), %d loops, %d local edges; graph %zu nodes, %zu edges\n",
+      spec.c_str(), index, lost_frames, keyframes.size(), backend.numRelocalizations(),
+      relocalization_attempts, backend.numLoops(), backend.numLocalEdges(),
+      backend.graph().numNodes(), backend.graph().numEdges());
   report.set("optimization_iterations_mean", mean(iterations));
   report.setLatencySamples("backend_cpu", backend_cpu_ms);
   std::printf("back end per keyframe (thread CPU): %.1f ms mean, %.1f ms p95, %.1f ms max\n",
               mean(backend_cpu_ms), percentileOf(backend_cpu_ms, 95),
               percentileOf(backend_cpu_ms, 100));
   report.set("full_optimizations_count", full_optimisations);
-  std::printf("per keyframe: %d optimisations (%d of the whole graph; %.1f iterations mean), "
-              "%.2f ms mean, %.2f ms p95, %.2f ms max; loop detection %.2f ms mean; local "
-              "matching %.2f ms mean\n",
-              optimisations, full_optimisations, mean(iterations), mean(optimisation_ms),
-              percentileOf(optimisation_ms, 95),
-              percentileOf(optimisation_ms, 100), mean(loop_ms), mean(local_ms));
+  std::printf(
+      "per keyframe: %d optimisations (%d of the whole graph; %.1f iterations mean), "
+      "%.2f ms mean, %.2f ms p95, %.2f ms max; loop detection %.2f ms mean; local "
+      "matching %.2f ms mean\n",
+      optimisations, full_optimisations, mean(iterations), mean(optimisation_ms),
+      percentileOf(optimisation_ms, 95), percentileOf(optimisation_ms, 100), mean(loop_ms),
+      mean(local_ms));
   if (const auto gt = source->groundTruth(); gt && !gt->empty()) {
     try {
       const Errors odometry = evaluate(*gt, frames_odometry);
@@ -340,7 +342,8 @@ int main(int argc, char** argv) {
                   odometry.rpe_m, odometry.rpe_deg, slam.rpe_m, slam.rpe_deg);
       if (options.has("edge-report")) reportEdges(*gt, keyframes, backend);
       std::printf("keyframe ATE RMSE: odometry %.4f m, after the back end %.4f m (%.1fx)\n",
-                  kf_before.ate_m, kf_after.ate_m, kf_before.ate_m / std::max(kf_after.ate_m, 1e-12));
+                  kf_before.ate_m, kf_after.ate_m,
+                  kf_before.ate_m / std::max(kf_after.ate_m, 1e-12));
     } catch (const std::exception& e) {
       std::cerr << "evaluation failed: " << e.what() << "\n";
     }

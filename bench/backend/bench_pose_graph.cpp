@@ -127,7 +127,11 @@ void BM_OptimizeDesk(benchmark::State& state) {
   state.counters["ms_per_iteration"] = result.time_ms / std::max(1, result.iterations);
 }
 BENCHMARK(BM_OptimizeDesk)
-    ->Args({100, 0})->Args({300, 0})->Args({100, 1})->Args({300, 1})->Args({1000, 1})
+    ->Args({100, 0})
+    ->Args({300, 0})
+    ->Args({100, 1})
+    ->Args({300, 1})
+    ->Args({1000, 1})
     ->Unit(benchmark::kMillisecond);
 
 BENCHMARK(BM_OptimizeRing)->Arg(100)->Arg(300)->Arg(1000)->Arg(3000)->Unit(benchmark::kMillisecond);

@@ -8,12 +8,12 @@
 // from its first frames (no network), so they measure slamd's own work per received message; the
 // OpenNI2 benchmark reads the DummyDevice (320x240) and the synthetic one renders a corridor.
 
-#include <benchmark/benchmark.h>
-
 #include <cstdlib>
 #include <ctime>
 #include <filesystem>
 #include <vector>
+
+#include <benchmark/benchmark.h>
 
 #include "slamd/capture/depth_preprocessor.hpp"
 #include "slamd/capture/tum_source.hpp"

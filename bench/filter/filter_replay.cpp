@@ -85,9 +85,8 @@ double percentile(std::vector<double> v, double p) {
 
 /// The ground-truth pose nearest to t_s, or nullptr when none is within 20 ms.
 const StampedPose* nearestGroundTruth(const Trajectory& gt, double t_s) {
-  const auto it = std::lower_bound(gt.begin(), gt.end(), t_s, [](const StampedPose& p, double s) {
-    return p.timestamp_s < s;
-  });
+  const auto it = std::lower_bound(
+      gt.begin(), gt.end(), t_s, [](const StampedPose& p, double s) { return p.timestamp_s < s; });
   const StampedPose* best = nullptr;
   if (it != gt.end()) best = &*it;
   if (it != gt.begin() && (!best || t_s - std::prev(it)->timestamp_s < best->timestamp_s - t_s)) {
@@ -105,8 +104,8 @@ std::vector<Eigen::Vector3d> rotationErrorsDeg(const Trajectory& gt, const Traje
   if (est.empty()) return errors;
   const StampedPose* g0 = nearest(est.front().timestamp_s);
   if (!g0) return errors;
-  const Eigen::Matrix3d R_gt_est = g0->T_world_camera.linear() *
-                                   est.front().T_world_camera.linear().transpose();
+  const Eigen::Matrix3d R_gt_est =
+      g0->T_world_camera.linear() * est.front().T_world_camera.linear().transpose();
   for (const StampedPose& p : est) {
     const StampedPose* g = nearest(p.timestamp_s);
     if (!g) continue;
@@ -119,8 +118,9 @@ std::vector<Eigen::Vector3d> rotationErrorsDeg(const Trajectory& gt, const Traje
 Eigen::Vector3d rmsPerAxis(const std::vector<Eigen::Vector3d>& errors) {
   Eigen::Vector3d sum_sq = Eigen::Vector3d::Zero();
   for (const auto& e : errors) sum_sq += e.cwiseProduct(e);
-  return errors.empty() ? Eigen::Vector3d::Constant(NAN)
-                        : Eigen::Vector3d((sum_sq / static_cast<double>(errors.size())).cwiseSqrt());
+  return errors.empty()
+             ? Eigen::Vector3d::Constant(NAN)
+             : Eigen::Vector3d((sum_sq / static_cast<double>(errors.size())).cwiseSqrt());
 }
 
 /// Per-frame rotation errors (rotationErrorsDeg of odometry and filter over the same timestamps,
@@ -196,8 +196,8 @@ int main(int argc, char** argv) {
   std::vector<OdometryRecord> computed;
 
   std::unique_ptr<VanishingPointFilter> filter;
-  std::FILE* vp_log = options.has("vp-log") ? std::fopen(options.value("vp-log").c_str(), "w")
-                                            : nullptr;
+  std::FILE* vp_log =
+      options.has("vp-log") ? std::fopen(options.value("vp-log").c_str(), "w") : nullptr;
   Trajectory filtered, odometry_only;
   SE3 chained = SE3::Identity();
   std::vector<double> cpu_ms, nis_compared, nis_accepted;
@@ -256,20 +256,20 @@ int main(int argc, char** argv) {
       if (u.accepted || u.status == VpUpdateStatus::kGated) axis_nis_compared.push_back(u.nis);
     }
     if (vp_log) {
-      std::fprintf(vp_log, "%d %.6f %s", frames, utimeToSeconds(r.utime),
-                   out.vanishing_point ? vanishingPointStatusName(out.vanishing_point->status)
-                                       : "NONE");
+      std::fprintf(
+          vp_log, "%d %.6f %s", frames, utimeToSeconds(r.utime),
+          out.vanishing_point ? vanishingPointStatusName(out.vanishing_point->status) : "NONE");
       if (ok) {
         const VanishingPoint& vp = *out.vanishing_point;
         std::fprintf(vp_log, " px %.1f %.1f sd %.2f %.2f lines %d/%d rms %.2f", vp.pixel.x(),
                      vp.pixel.y(), std::sqrt(vp.pixel_covariance(0, 0)),
-                     std::sqrt(vp.pixel_covariance(1, 1)), vp.num_supporting_lines,
-                     vp.num_segments, vp.rms_residual_px);
+                     std::sqrt(vp.pixel_covariance(1, 1)), vp.num_supporting_lines, vp.num_segments,
+                     vp.rms_residual_px);
       }
       if (out.update) {
-        std::fprintf(vp_log, " %s lm %d pred %.1f %.1f nis %.2f", vpUpdateStatusName(out.update->status),
-                     out.update->landmark_id, out.update->predicted_px.x(),
-                     out.update->predicted_px.y(), out.update->nis);
+        std::fprintf(vp_log, " %s lm %d pred %.1f %.1f nis %.2f",
+                     vpUpdateStatusName(out.update->status), out.update->landmark_id,
+                     out.update->predicted_px.x(), out.update->predicted_px.y(), out.update->nis);
       }
       for (std::size_t k = 0; k < out.axis_updates.size(); ++k) {
         const SurfaceAxis& axis = out.surface_axes->axes[k];
@@ -288,7 +288,8 @@ int main(int argc, char** argv) {
   if (!have_cache && options.has("odometry-cache")) {
     writeCache(options.value("odometry-cache"), computed);
   }
-  if (options.has("trajectory")) writeTumTrajectory(options.value("trajectory"), filtered, "filter");
+  if (options.has("trajectory"))
+    writeTumTrajectory(options.value("trajectory"), filtered, "filter");
   if (options.has("odometry-trajectory")) {
     writeTumTrajectory(options.value("odometry-trajectory"), odometry_only, "odometry");
   }
@@ -299,13 +300,13 @@ int main(int argc, char** argv) {
   double nis_acc_mean = 0.0;
   for (double v : nis_accepted) nis_acc_mean += v;
   if (!nis_accepted.empty()) nis_acc_mean /= static_cast<double>(nis_accepted.size());
-  std::printf("%d frames: %d vanishing points, %d accepted, %d gated, %zu landmarks, %lld "
-              "re-anchors; mean NIS %.2f over %zu compared (accepted only %.2f); filter CPU median "
-              "%.2f ms p95 %.2f ms\n",
-              frames, detected, accepted, gated, filter ? filter->ekf().landmarks().size() : 0u,
-              filter ? static_cast<long long>(filter->ekf().counters().reanchors) : 0LL,
-              nis_mean, nis_compared.size(), nis_acc_mean, percentile(cpu_ms, 50),
-              percentile(cpu_ms, 95));
+  std::printf(
+      "%d frames: %d vanishing points, %d accepted, %d gated, %zu landmarks, %lld "
+      "re-anchors; mean NIS %.2f over %zu compared (accepted only %.2f); filter CPU median "
+      "%.2f ms p95 %.2f ms\n",
+      frames, detected, accepted, gated, filter ? filter->ekf().landmarks().size() : 0u,
+      filter ? static_cast<long long>(filter->ekf().counters().reanchors) : 0LL, nis_mean,
+      nis_compared.size(), nis_acc_mean, percentile(cpu_ms, 50), percentile(cpu_ms, 95));
   double axis_nis_mean = 0.0;
   for (double v : axis_nis_compared) axis_nis_mean += v;
   if (!axis_nis_compared.empty()) axis_nis_mean /= static_cast<double>(axis_nis_compared.size());
@@ -326,21 +327,22 @@ int main(int argc, char** argv) {
     }
     std::printf("ATE odometry %.4f m, filter %.4f m (%.3fx)\n", ate_odo, ate_filter,
                 ate_filter / ate_odo);
-    std::printf("end rotation error about world x y z (deg): odometry %.3f %.3f %.3f, filter "
-                "%.3f %.3f %.3f\n",
-                end_odo.x(), end_odo.y(), end_odo.z(), end_filter.x(), end_filter.y(),
-                end_filter.z());
-    std::printf("RMS rotation error about world x y z (deg): odometry %.3f %.3f %.3f, filter "
-                "%.3f %.3f %.3f\n",
-                rms_odo.x(), rms_odo.y(), rms_odo.z(), rms_filter.x(), rms_filter.y(),
-                rms_filter.z());
+    std::printf(
+        "end rotation error about world x y z (deg): odometry %.3f %.3f %.3f, filter "
+        "%.3f %.3f %.3f\n",
+        end_odo.x(), end_odo.y(), end_odo.z(), end_filter.x(), end_filter.y(), end_filter.z());
+    std::printf(
+        "RMS rotation error about world x y z (deg): odometry %.3f %.3f %.3f, filter "
+        "%.3f %.3f %.3f\n",
+        rms_odo.x(), rms_odo.y(), rms_odo.z(), rms_filter.x(), rms_filter.y(), rms_filter.z());
     // One line for scripts (bench/filter/corridor_eval.sh).
-    std::printf("summary ate_odometry_m=%.6f ate_filter_m=%.6f end_odometry_deg=%.4f,%.4f,%.4f "
-                "end_filter_deg=%.4f,%.4f,%.4f rms_odometry_deg=%.4f,%.4f,%.4f "
-                "rms_filter_deg=%.4f,%.4f,%.4f vp_nis_mean=%.3f filter_cpu_median_ms=%.3f\n",
-                ate_odo, ate_filter, end_odo.x(), end_odo.y(), end_odo.z(), end_filter.x(),
-                end_filter.y(), end_filter.z(), rms_odo.x(), rms_odo.y(), rms_odo.z(),
-                rms_filter.x(), rms_filter.y(), rms_filter.z(), nis_mean, percentile(cpu_ms, 50));
+    std::printf(
+        "summary ate_odometry_m=%.6f ate_filter_m=%.6f end_odometry_deg=%.4f,%.4f,%.4f "
+        "end_filter_deg=%.4f,%.4f,%.4f rms_odometry_deg=%.4f,%.4f,%.4f "
+        "rms_filter_deg=%.4f,%.4f,%.4f vp_nis_mean=%.3f filter_cpu_median_ms=%.3f\n",
+        ate_odo, ate_filter, end_odo.x(), end_odo.y(), end_odo.z(), end_filter.x(), end_filter.y(),
+        end_filter.z(), rms_odo.x(), rms_odo.y(), rms_odo.z(), rms_filter.x(), rms_filter.y(),
+        rms_filter.z(), nis_mean, percentile(cpu_ms, 50));
   }
   return 0;
 }

@@ -10,11 +10,11 @@
 // (the whole integrate() call), points_per_s (filtered points inserted per second of
 // integrate()), map_MiB (OcTree memory), update_kB_* / full_map_kB (encoded LCM message sizes).
 
-#include <benchmark/benchmark.h>
-
 #include <algorithm>
 #include <string>
 #include <vector>
+
+#include <benchmark/benchmark.h>
 
 #include "box_room.hpp"
 #include "slamd/comms/map_codec.hpp"
@@ -85,8 +85,8 @@ void BM_VoxelFilter(benchmark::State& state) {
   PointCloud cloud;
   DepthCloudStats stats;
   depthToCloud(frame.depth_m, frame.color_bgr, frame.intrinsics, {}, cloud, stats);
-  const auto mode = state.range(1) == 0 ? VoxelFilterMode::kNearestToCentre
-                                        : VoxelFilterMode::kCentroid;
+  const auto mode =
+      state.range(1) == 0 ? VoxelFilterMode::kNearestToCentre : VoxelFilterMode::kCentroid;
   VoxelGridFilter filter;
   PointCloud out;
   for (auto _ : state) {

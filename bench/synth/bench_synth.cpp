@@ -10,11 +10,11 @@
 // BM_SensorDepth: the depth sensor model alone on a corridor render.
 // BM_BuildScene/<scene>: procedural scene construction (textures included).
 
-#include <benchmark/benchmark.h>
-
 #include <ctime>
 #include <string>
 #include <vector>
+
+#include <benchmark/benchmark.h>
 
 #include "slamd/common/config.hpp"
 #include "slamd/common/latency_histogram.hpp"

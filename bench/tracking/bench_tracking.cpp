@@ -68,7 +68,8 @@ void BM_ProcessFrame(benchmark::State& state) {
   for (auto _ : state) {
     const std::int64_t period = 2 * static_cast<std::int64_t>(frames.size()) - 2;
     const std::int64_t k = n % period;
-    const std::size_t index = static_cast<std::size_t>(k < static_cast<std::int64_t>(frames.size()) ? k : period - k);
+    const std::size_t index =
+        static_cast<std::size_t>(k < static_cast<std::int64_t>(frames.size()) ? k : period - k);
     RgbdFrame frame = frames[index];
     frame.utime = 1'000'000 + n * 33'333;
     frame.sequence = n++;
@@ -113,7 +114,8 @@ BENCHMARK(BM_RansacRigid)->Arg(500)->Unit(benchmark::kMicrosecond);
 void BM_ConsistentClique(benchmark::State& state) {
   const auto matches = correspondences(static_cast<int>(state.range(0)), 0.5);
   for (auto _ : state) {
-    benchmark::DoNotOptimize(maximumConsistentClique(matches, test::fr1Camera(), 0.02, 0.0015).size());
+    benchmark::DoNotOptimize(
+        maximumConsistentClique(matches, test::fr1Camera(), 0.02, 0.0015).size());
   }
 }
 BENCHMARK(BM_ConsistentClique)->Arg(500)->Unit(benchmark::kMicrosecond);
@@ -125,7 +127,8 @@ void BM_RefinePose(benchmark::State& state) {
   xi << 0.05, -0.03, 0.08, 0.04, -0.06, 0.02;
   const SE3 start = expSE3(xi * 1.02);
   for (auto _ : state) {
-    benchmark::DoNotOptimize(refinePose(matches, use, test::fr1Camera(), start, RefinementOptions()).iterations);
+    benchmark::DoNotOptimize(
+        refinePose(matches, use, test::fr1Camera(), start, RefinementOptions()).iterations);
   }
 }
 BENCHMARK(BM_RefinePose)->Arg(500)->Unit(benchmark::kMicrosecond);

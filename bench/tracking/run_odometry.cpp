@@ -109,13 +109,14 @@ int main(int argc, char** argv) {
             << failures << " failed, " << keyframes << " keyframes; per frame median "
             << percentile(total_ms, 50) << " ms, p95 " << percentile(total_ms, 95)
             << " ms; thread CPU median " << percentile(cpu_ms, 50) << " ms, p95 "
-            << percentile(cpu_ms, 95) << " ms (wall: features " << percentile(features_ms, 50) << ", matching "
-            << percentile(matching_ms, 50) << ", motion " << percentile(motion_ms, 50) << ")\n";
+            << percentile(cpu_ms, 95) << " ms (wall: features " << percentile(features_ms, 50)
+            << ", matching " << percentile(matching_ms, 50) << ", motion "
+            << percentile(motion_ms, 50) << ")\n";
   if (options.has("trajectory")) {
     try {
-      writeTumTrajectory(options.value("trajectory"), estimate,
-                         std::string("slamd visual odometry, frontend ") +
-                             frontEndName(tracking.frontend));
+      writeTumTrajectory(
+          options.value("trajectory"), estimate,
+          std::string("slamd visual odometry, frontend ") + frontEndName(tracking.frontend));
     } catch (const std::exception& e) {
       std::cerr << e.what() << "\n";
       return kExitOutputError;

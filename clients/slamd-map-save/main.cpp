@@ -33,8 +33,7 @@ bool writeTree(const octomap::OcTree& tree, const std::string& path, std::string
     return false;
   }
   return slamd::writeFileAtomically(
-      path,
-      [&](std::ostream& out) { return full ? tree.write(out) : tree.writeBinaryConst(out); },
+      path, [&](std::ostream& out) { return full ? tree.write(out) : tree.writeBinaryConst(out); },
       error);
 }
 
@@ -118,8 +117,8 @@ int main(int argc, char** argv) {
       }
     });
     bus.startHandling();
-    SLAMD_LOG_INFO("slamd-map-save") << "listening on " << channels.map_update << " and "
-                                     << channels.map;
+    SLAMD_LOG_INFO("slamd-map-save")
+        << "listening on " << channels.map_update << " and " << channels.map;
     while (!signals.waitFor(std::chrono::milliseconds(200))) {
       std::lock_guard<std::mutex> lock(mutex);
       if (timeout_s > 0 && (steadyNowNs() - last_message_ns) * 1e-9 > timeout_s) break;
@@ -130,9 +129,11 @@ int main(int argc, char** argv) {
               << replica.updatesSkipped() << " skipped, " << full_maps << " full maps, "
               << inconsistent + static_cast<std::int64_t>(bus.malformedTotal())
               << " malformed or inconsistent messages; " << replica.tree().getNumLeafNodes()
-              << " voxels" << (replica.synchronised() ? "" : " (NOT synchronised: a gap in the "
-                                                               "updates was not yet healed by a "
-                                                               "full map)")
+              << " voxels"
+              << (replica.synchronised() ? ""
+                                         : " (NOT synchronised: a gap in the "
+                                           "updates was not yet healed by a "
+                                           "full map)")
               << "\n";
     int exit_code = kExitOk;
     std::string error;

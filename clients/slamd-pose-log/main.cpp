@@ -75,10 +75,10 @@ int main(int argc, char** argv) {
     std::cerr << "slamd-pose-log: cannot write '" << options.value("out") << "'\n";
     return kExitOutputError;
   }
-  out << (format == "tum" ? "# timestamp tx ty tz qx qy qz qw (slamd-pose-log, channel " +
-                                channels.pose + ")\n"
-                          : "utime,sequence,tx,ty,tz,qw,qx,qy,qz,var_x,var_y,var_z,var_rx,"
-                            "var_ry,var_rz,tracking_state,source\n");
+  out << (format == "tum"
+              ? "# timestamp tx ty tz qx qy qz qw (slamd-pose-log, channel " + channels.pose + ")\n"
+              : "utime,sequence,tx,ty,tz,qw,qx,qy,qz,var_x,var_y,var_z,var_rx,"
+                "var_ry,var_rz,tracking_state,source\n");
 
   std::mutex mutex;  // the LCM thread writes, the main thread flushes
   long long received = 0;
@@ -99,8 +99,8 @@ int main(int argc, char** argv) {
       if (max_count > 0 && received >= max_count) signals.request();
     });
     bus.startHandling();
-    SLAMD_LOG_INFO("slamd-pose-log") << "recording " << channels.pose << " to "
-                                     << options.value("out");
+    SLAMD_LOG_INFO("slamd-pose-log")
+        << "recording " << channels.pose << " to " << options.value("out");
     while (!signals.waitFor(std::chrono::seconds(1))) {
       std::lock_guard<std::mutex> lock(mutex);
       out.flush();

@@ -20,7 +20,6 @@
 #include "slamd/comms/status_codec.hpp"
 #include "slamd/status_t.hpp"
 
-
 int main(int argc, char** argv) {
   using namespace slamd;
   ShutdownSignals signals;

@@ -41,15 +41,14 @@ std::optional<BackendCorrection> BackendStage::process(const EstimatedPacket& pa
     // odometry edge's uncertainty.
     const bool measured_from_previous_keyframe =
         latest_keyframe_id_ >= 0 && odometry.reference_keyframe_id == latest_keyframe_id_;
-    const BackendUpdate update =
-        measured_from_previous_keyframe
-            ? backend_->addKeyframe(keyframe, odometry.covariance_ref_curr)
-            : backend_->addKeyframe(keyframe);
+    const BackendUpdate update = measured_from_previous_keyframe
+                                     ? backend_->addKeyframe(keyframe, odometry.covariance_ref_curr)
+                                     : backend_->addKeyframe(keyframe);
     ++stats_.keyframes;
     latest_keyframe_id_ = keyframe->id;
     frames_.addKeyframe(keyframe);
-    keyframes_.push_back(KeyframePoseEntry{keyframe->id, keyframe->utime, keyframe->segment,
-                                           T_world_camera});
+    keyframes_.push_back(
+        KeyframePoseEntry{keyframe->id, keyframe->utime, keyframe->segment, T_world_camera});
     if (update.optimized) correction = makeCorrection(update, keyframe->utime);
   }
   frames_.addFrame(odometry, T_world_camera);
@@ -80,20 +79,19 @@ BackendCorrection BackendStage::makeCorrection(const BackendUpdate& update, Utim
     entry.T_world_camera = backend_->pose(entry.keyframe_id);
   }
   if (update.relocalized) {
-    SLAMD_LOG_INFO(kLog) << "keyframe " << update.keyframe_id
-                         << ": relocalised against keyframe " << update.relocalization.match_id
-                         << " after " << update.relocalization_attempts
+    SLAMD_LOG_INFO(kLog) << "keyframe " << update.keyframe_id << ": relocalised against keyframe "
+                         << update.relocalization.match_id << " after "
+                         << update.relocalization_attempts
                          << " attempts: tracking resumes in the same map";
   }
   if (update.loop.status == LoopStatus::kLoopFound) {
     SLAMD_LOG_INFO(kLog) << "keyframe " << update.keyframe_id << ": loop closed with keyframe "
-                         << update.loop.match_id << " (" << update.loop.num_inliers
-                         << " inliers)";
+                         << update.loop.match_id << " (" << update.loop.num_inliers << " inliers)";
   }
   SLAMD_LOG_DEBUG(kLog) << "keyframe " << update.keyframe_id << ": " << update.num_local_edges
                         << " local edges; graph of " << update.optimization.num_nodes
-                        << " keyframes, " << update.optimization.num_edges
-                        << " edges optimised in " << update.optimization.time_ms << " ms";
+                        << " keyframes, " << update.optimization.num_edges << " edges optimised in "
+                        << update.optimization.time_ms << " ms";
   return correction;
 }
 

@@ -40,8 +40,9 @@ std::optional<std::string> resolveCommandSavePath(const std::string& argument,
   const fs::path requested(argument);
   if (argument.find('/') != std::string::npos) {
     if (!requested.is_absolute()) {
-      error = refused + "give a bare file name (written into daemon.save_dir) or an absolute path "
-                        "inside it";
+      error = refused +
+              "give a bare file name (written into daemon.save_dir) or an absolute path "
+              "inside it";
       return std::nullopt;
     }
     std::error_code ec;

@@ -26,9 +26,10 @@ const ConfigSchema<DaemonConfig>& DaemonConfig::schema() {
           .number("heartbeat_period_s", &C::heartbeat_period_s, 0.01, 10.0, "s",
                   "with no frame for this long the capture thread sends a heartbeat so later "
                   "stages can serve commands")
-          .number("tracking_queue", &C::tracking_queue, 1, 1000, "frames",
-                  "frames waiting for tracking; live and real-time sources drop the oldest (1: "
-                  "tracking always gets the newest frame), datasets played as fast as possible wait")
+          .number(
+              "tracking_queue", &C::tracking_queue, 1, 1000, "frames",
+              "frames waiting for tracking; live and real-time sources drop the oldest (1: "
+              "tracking always gets the newest frame), datasets played as fast as possible wait")
           .number("filter_queue", &C::filter_queue, 1, 1000, "frames",
                   "tracked frames waiting for the filter (never dropped)")
           .number("publish_queue", &C::publish_queue, 1, 1000, "poses",

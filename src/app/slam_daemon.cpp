@@ -13,7 +13,6 @@
 #include "slamd/app/command_save_path.hpp"
 #include "slamd/app/daemon_config.hpp"
 #include "slamd/app/stage_steps.hpp"
-#include "slamd/comms/odometry_codec.hpp"
 #include "slamd/command_t.hpp"
 #include "slamd/common/file_io.hpp"
 #include "slamd/common/log.hpp"
@@ -24,11 +23,12 @@
 #include "slamd/comms/lcm_bus.hpp"
 #include "slamd/comms/lcm_frame_publisher.hpp"
 #include "slamd/comms/map_codec.hpp"
+#include "slamd/comms/odometry_codec.hpp"
 #include "slamd/comms/pose_codec.hpp"
 #include "slamd/comms/status_codec.hpp"
 #include "slamd/eval/json_writer.hpp"
-#include "slamd/pipeline/pipeline.hpp"
 #include "slamd/mapping/mapper.hpp"
+#include "slamd/pipeline/pipeline.hpp"
 #include "slamd/sources/create_frame_source.hpp"
 
 namespace slamd {
@@ -48,8 +48,7 @@ const char* dropReason(const std::string& stage) {
 /// What the steps publish, on the daemon's LCM channels.
 class LcmDaemonPublisher final : public DaemonPublisher {
  public:
-  LcmDaemonPublisher(LcmBus& bus, const ChannelConfig& channels)
-      : bus_(bus), channels_(channels) {}
+  LcmDaemonPublisher(LcmBus& bus, const ChannelConfig& channels) : bus_(bus), channels_(channels) {}
 
   void publishPose(const PoseEstimate& pose) override {
     bus_.publishMessage(channels_.pose, toPoseMessage(pose));
@@ -180,7 +179,8 @@ struct SlamDaemon::Impl {
                           StatusBuilder& status_builder);
   void handleCommands(ShutdownSignals& signals);
   void handleMapCommand(const slamd::command_t& command);
-  void publishStatus(LcmBus& bus, StatusBuilder& builder, Pipeline& pipeline, const std::string& note);
+  void publishStatus(LcmBus& bus, StatusBuilder& builder, Pipeline& pipeline,
+                     const std::string& note);
   /// Fills `summary` from the stopped pipeline's counters and the steps.
   void summarize(const std::vector<StageStats>& stats, const FrameSourceStats& source_stats,
                  const LcmBus& bus, std::int64_t start_ns);
@@ -217,8 +217,8 @@ void SlamDaemon::Impl::checkOutputsAreDistinct() const {
       const auto a = std::filesystem::weakly_canonical(*outputs[i].second, ignored);
       const auto b = std::filesystem::weakly_canonical(*outputs[j].second, ignored);
       if (a == b) {
-        throw ConfigError(std::string("the ") + outputs[i].first + " and the " +
-                          outputs[j].first + " outputs both name " + *outputs[i].second +
+        throw ConfigError(std::string("the ") + outputs[i].first + " and the " + outputs[j].first +
+                          " outputs both name " + *outputs[i].second +
                           ": one would overwrite the other");
       }
     }
@@ -236,7 +236,6 @@ void SlamDaemon::Impl::removeStaleTemporaryFilesOfOutputs() const {
                             "replacing is intact)";
   }
 }
-
 
 void SlamDaemon::Impl::handleCommands(ShutdownSignals& signals) {
   while (auto command = commands.tryPop()) {
@@ -277,7 +276,7 @@ void SlamDaemon::Impl::handleMapCommand(const slamd::command_t& command) {
   }
   MapRequest request;
   request.kind = command.command == slamd::command_t::SAVE_MAP ? MapRequest::Kind::kSave
-                                                                : MapRequest::Kind::kPublish;
+                                                               : MapRequest::Kind::kPublish;
   request.path = !daemon.map_out.empty() ? daemon.map_out : daemon.map_save_path;
   if (request.kind == MapRequest::Kind::kSave && !command.argument.empty()) {
     // The file named by a peer on the network: confined to daemon.save_dir.
@@ -339,9 +338,9 @@ void SlamDaemon::Impl::publishStatus(LcmBus& bus, StatusBuilder& builder, Pipeli
     extras.message += (extras.message.empty() ? "" : "; ") + std::to_string(malformed) +
                       " malformed messages received";
   }
-  bus.publishMessage(channels.status, builder.build(wallClockUtime(), steadyNowNs(),
-                                                    pipeline.stats(),
-                                                    steps->publish->endToEnd().snapshot(), extras));
+  bus.publishMessage(channels.status,
+                     builder.build(wallClockUtime(), steadyNowNs(), pipeline.stats(),
+                                   steps->publish->endToEnd().snapshot(), extras));
 }
 
 bool SlamDaemon::Impl::openSource() {
@@ -355,19 +354,16 @@ bool SlamDaemon::Impl::openSource() {
                        << (source->isLive() ? " (live: frames are dropped, never queued, when "
                                               "tracking falls behind)"
                                             : "");
-  SLAMD_LOG_INFO(kLog) << "stages: capture, tracking (" << frontEndName(tracking_config.frontend)
-                       << "), filter ("
-                       << (filter_config.enabled
-                               ? (filter_config.vanishing_points ? "EKF + vanishing points"
-                                                                 : "EKF, no vanishing points")
-                               : "off: odometry chained")
-                       << "), publish, mapping ("
-                       << (mapper ? (mapping_config.keyframes_only ? "keyframes" : "every frame")
-                                  : "off")
-                       << "), back end ("
-                       << (backend ? "loop closing, relocalisation, pose graph"
-                                   : "off: backend.enabled is false")
-                       << ")";
+  SLAMD_LOG_INFO(kLog)
+      << "stages: capture, tracking (" << frontEndName(tracking_config.frontend) << "), filter ("
+      << (filter_config.enabled ? (filter_config.vanishing_points ? "EKF + vanishing points"
+                                                                  : "EKF, no vanishing points")
+                                : "off: odometry chained")
+      << "), publish, mapping ("
+      << (mapper ? (mapping_config.keyframes_only ? "keyframes" : "every frame") : "off")
+      << "), back end ("
+      << (backend ? "loop closing, relocalisation, pose graph" : "off: backend.enabled is false")
+      << ")";
   return true;
 }
 
@@ -402,15 +398,14 @@ void SlamDaemon::Impl::buildSteps(LcmBus& bus, DaemonPublisher& publisher) {
   s.tracking.emplace(tracking_config);
   // Vanishing points: detected on their own thread in parallel with tracking, joined to the
   // tracked frame by the filter.
-  const bool vanishing_point_thread = daemon.vanishing_point_thread && filter_config.enabled &&
-                                      filter_config.vanishing_points;
+  const bool vanishing_point_thread =
+      daemon.vanishing_point_thread && filter_config.enabled && filter_config.vanishing_points;
   if (vanishing_point_thread) s.vanishing.emplace(filter_config, s.vanishing_points);
   // Datasets played as fast as possible wait for every detection (repeatable runs); the generous
   // bound only guards against a detection that never comes (its frame failed on that thread).
-  const auto wait = source->isLive()
-                        ? std::chrono::microseconds(static_cast<std::int64_t>(
-                              daemon.vanishing_point_wait_ms * 1000.0))
-                        : std::chrono::microseconds(2'000'000);
+  const auto wait = source->isLive() ? std::chrono::microseconds(static_cast<std::int64_t>(
+                                           daemon.vanishing_point_wait_ms * 1000.0))
+                                     : std::chrono::microseconds(2'000'000);
   s.filter.emplace(filter_config, vanishing_point_thread ? &s.vanishing_points : nullptr, wait);
   s.publish.emplace(publisher, daemon.world_frame, daemon.camera_frame,
                     backend ? &s.pose_corrections : nullptr);
@@ -435,8 +430,8 @@ void SlamDaemon::Impl::wire(Pipeline& pipeline) {
   auto edge = [](int capacity, EdgePolicy policy) {
     return EdgeOptions{static_cast<std::size_t>(capacity), policy};
   };
-  const EdgeOptions frames = edge(daemon.tracking_queue,
-                                  live ? EdgePolicy::kDropOldest : EdgePolicy::kBackpressure);
+  const EdgeOptions frames =
+      edge(daemon.tracking_queue, live ? EdgePolicy::kDropOldest : EdgePolicy::kBackpressure);
   const EdgeOptions filter_in = edge(daemon.filter_queue, EdgePolicy::kBackpressure);
   const EdgeOptions publish_in = edge(daemon.publish_queue, EdgePolicy::kBackpressure);
   const EdgeOptions mapping_in =
@@ -464,9 +459,10 @@ void SlamDaemon::Impl::wire(Pipeline& pipeline) {
   // clang-format on
 }
 
-std::string SlamDaemon::Impl::controlLoop(ShutdownSignals& signals, LcmBus& bus,
-                                          Pipeline& pipeline, StatusBuilder& status_builder) {
-  SLAMD_LOG_INFO(kLog) << "running; LCM " << (channels.lcm_url.empty() ? "<default URL>" : channels.lcm_url)
+std::string SlamDaemon::Impl::controlLoop(ShutdownSignals& signals, LcmBus& bus, Pipeline& pipeline,
+                                          StatusBuilder& status_builder) {
+  SLAMD_LOG_INFO(kLog) << "running; LCM "
+                       << (channels.lcm_url.empty() ? "<default URL>" : channels.lcm_url)
                        << ", poses on " << channels.pose << ", status on " << channels.status
                        << ", commands on " << channels.command;
   const auto status_period_ns = static_cast<std::int64_t>(daemon.status_period_s * 1e9);
@@ -501,8 +497,8 @@ int SlamDaemon::Impl::run(ShutdownSignals& signals) {
   const std::string stop_reason = controlLoop(signals, *bus, pipeline, status_builder);
   SLAMD_LOG_INFO(kLog) << "stopping (" << stop_reason << "): draining queued frames";
   steps->capture->resume();
-  const StopReport stop = pipeline.stop(std::chrono::milliseconds(
-      static_cast<std::int64_t>(daemon.drain_deadline_s * 1000.0)));
+  const StopReport stop = pipeline.stop(
+      std::chrono::milliseconds(static_cast<std::int64_t>(daemon.drain_deadline_s * 1000.0)));
   if (!stop.drained) {
     SLAMD_LOG_WARN(kLog) << "drain deadline passed; " << stop.discarded << " frames discarded";
   }
@@ -575,8 +571,7 @@ void SlamDaemon::Impl::logSummary(const std::vector<StageStats>& stats,
                                   const FrameSourceStats& source_stats, const LcmBus& bus) const {
   if (summary.commands_refused > 0) {
     SLAMD_LOG_WARN(kLog) << "commands: " << summary.commands_refused
-                         << " refused (SAVE_MAP outside daemon.save_dir " << daemon.save_dir
-                         << ")";
+                         << " refused (SAVE_MAP outside daemon.save_dir " << daemon.save_dir << ")";
   }
   for (const auto& stage : stats) {
     std::uint64_t dropped = 0;
@@ -668,8 +663,8 @@ void SlamDaemon::Impl::logDropSummary(const std::vector<StageStats>& stats,
     std::uint64_t dropped = 0;
     for (const auto& edge : stage.inputs) dropped += edge.dropped + edge.discarded;
     if (dropped > 0) {
-      line << "; " << dropped << " at the input of " << stage.name << " ("
-           << dropReason(stage.name) << ")";
+      line << "; " << dropped << " at the input of " << stage.name << " (" << dropReason(stage.name)
+           << ")";
     }
   }
   const std::uint64_t dropped_paused = steps->capture->stats().frames_dropped_paused;
@@ -698,7 +693,8 @@ bool SlamDaemon::Impl::writeMetrics(const std::vector<StageStats>& stats) {
   json.key("longest_capture_gap_s").value(summary.longest_capture_gap_s);
   json.key("longest_resume_s").value(summary.longest_resume_s);
   json.key("resumed_after_last_gap").value(summary.resumed_after_last_gap);
-  json.key("frames_behind_schedule").value(static_cast<std::int64_t>(summary.frames_behind_schedule));
+  json.key("frames_behind_schedule")
+      .value(static_cast<std::int64_t>(summary.frames_behind_schedule));
   json.key("frames_over_rate").value(static_cast<std::int64_t>(summary.frames_over_rate));
   json.key("frames_dropped_before_tracking")
       .value(static_cast<std::int64_t>(summary.frames_dropped_before_tracking));
@@ -738,7 +734,6 @@ bool SlamDaemon::Impl::writeMetrics(const std::vector<StageStats>& stats) {
   }
   return true;
 }
-
 
 void SlamDaemon::Impl::finishBackend() {
   const BackendStageStats& stats = backend->stats();

@@ -57,8 +57,8 @@ SourceStep<CapturePacket> CaptureStep::process() {
     // continues from the present, not from a stale buffered frame.
     const auto seen = resume_signal_.epoch();
     if (paused() && steadyNowNs() - last_emit_ns_ < heartbeat_period_ns_) {
-      resume_signal_.waitFor(seen, std::chrono::steady_clock::now() +
-                                       std::chrono::nanoseconds(heartbeat_period_ns_));
+      resume_signal_.waitFor(
+          seen, std::chrono::steady_clock::now() + std::chrono::nanoseconds(heartbeat_period_ns_));
       return SourceStep<CapturePacket>::idle();
     }
     return emit(nullptr);
@@ -161,10 +161,10 @@ void TrackingTally::record(TrackingState state, Utime utime) {
     gap_return_utime = -1;
   }
   const bool losing = state == TrackingState::kPredicted || state == TrackingState::kLost;
-  (measured                               ? tracked
-   : state == TrackingState::kPredicted   ? predicted
-   : state == TrackingState::kLost        ? lost
-                                          : not_initialized)
+  (measured                             ? tracked
+   : state == TrackingState::kPredicted ? predicted
+   : state == TrackingState::kLost      ? lost
+                                        : not_initialized)
       .fetch_add(1, std::memory_order_relaxed);
   const Utime start = loss_start_utime.load(std::memory_order_relaxed);
   if (losing) {
@@ -327,8 +327,7 @@ void MappingStep::process(const EstimatedPacket& packet) {
   if (!enter(packet.reset_epoch, packet.frame)) return;
   applyCorrections();
   serveRequests();
-  if (packet.frame && packet.odometry &&
-      packet.pose.tracking_state != TrackingState::kLost &&
+  if (packet.frame && packet.odometry && packet.pose.tracking_state != TrackingState::kLost &&
       packet.pose.tracking_state != TrackingState::kNotInitialized &&
       (!keyframes_only_ || packet.odometry->is_keyframe)) {
     std::optional<std::int64_t> keyframe_id;
@@ -366,8 +365,8 @@ void MappingStep::process(const EstimatedPacket& packet) {
 
 // --- back end --------------------------------------------------------------------------------
 
-BackendStep::BackendStep(BackendStage& backend, std::string world_frame,
-                         DaemonPublisher& publisher, SpscQueue<PoseCorrection>* pose_corrections,
+BackendStep::BackendStep(BackendStage& backend, std::string world_frame, DaemonPublisher& publisher,
+                         SpscQueue<PoseCorrection>* pose_corrections,
                          SpscQueue<MapCorrection>* map_corrections)
     : backend_(backend),
       world_frame_(std::move(world_frame)),
@@ -393,8 +392,8 @@ void BackendStep::process(const EstimatedPacket& packet) {
   correction->trajectory.frame_id = world_frame_;
   publisher_.publishKeyframes(correction->trajectory);
   if (pose_corrections_ &&
-      !pose_corrections_->tryPush(PoseCorrection{correction->T_world_uncorrected,
-                                                 correction->relocalized, resetEpoch()})) {
+      !pose_corrections_->tryPush(
+          PoseCorrection{correction->T_world_uncorrected, correction->relocalized, resetEpoch()})) {
     // Cannot happen while the publish step keeps up (it drains on every frame); if it does,
     // the next correction replaces this one anyway.
     SLAMD_LOG_WARN(kLog) << "pose correction not handed to the publish step: queue full";

@@ -15,9 +15,7 @@ constexpr double kOdometryFloorM = 0.005;
 constexpr double kTrackingFloorM = 0.001;
 constexpr double kTrackingFloorRad = 0.05 * M_PI / 180.0;
 
-double rotationAngle(const SE3& T) {
-  return Eigen::AngleAxisd(T.rotation()).angle();
-}
+double rotationAngle(const SE3& T) { return Eigen::AngleAxisd(T.rotation()).angle(); }
 
 }  // namespace
 
@@ -84,8 +82,7 @@ std::vector<std::int64_t> Backend::localWindow(std::int64_t keyframe_id) const {
   return window;
 }
 
-std::vector<LoopDetection> Backend::addLocalEdges(const Keyframe& keyframe,
-                                                  BackendUpdate& update) {
+std::vector<LoopDetection> Backend::addLocalEdges(const Keyframe& keyframe, BackendUpdate& update) {
   std::vector<LoopDetection> added;
   if (config_.local_edges <= 0) return added;
   // The keyframes the local window reaches before this keyframe's own edges: an edge to one of
@@ -259,7 +256,8 @@ BackendUpdate Backend::add(const KeyframePtr& keyframe, const Matrix6d* covarian
     }
     update.optimized = true;
     update.corrected_poses.reserve(graph_.numNodes());
-    for (std::int64_t id : graph_.nodeIds()) update.corrected_poses.emplace_back(id, graph_.pose(id));
+    for (std::int64_t id : graph_.nodeIds())
+      update.corrected_poses.emplace_back(id, graph_.pose(id));
   } else {
     update.full_optimization = false;
   }

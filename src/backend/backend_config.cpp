@@ -61,18 +61,17 @@ const ConfigSchema<BackendConfig>& BackendConfig::schema() {
                   "RANSAC reprojection threshold")
           .number("loop_ransac_iterations", &C::loop_ransac_iterations, 10, 100000, "",
                   "RANSAC hypotheses of a loop verification")
-          .number("loop_match_ratio", &C::loop_match_ratio, 0.3, 1.0, "",
-                  "descriptor ratio test")
-          .number("loop_max_descriptor_distance", &C::loop_max_descriptor_distance, 1, 256,
-                  "bits", "Hamming distance above which a match is discarded")
+          .number("loop_match_ratio", &C::loop_match_ratio, 0.3, 1.0, "", "descriptor ratio test")
+          .number("loop_max_descriptor_distance", &C::loop_max_descriptor_distance, 1, 256, "bits",
+                  "Hamming distance above which a match is discarded")
           .flag("align_patches", &C::align_patches,
                 "before refining a verified match, align each inlier's reference patch in the "
                 "query image (sub-pixel, as tracking does); off uses the ORB keypoint positions")
           .number("loop_consistency", &C::loop_consistency, 1, 20, "keyframes",
                   "consecutive keyframes whose verified candidates must agree before a loop is "
                   "accepted")
-          .number("loop_consistency_window", &C::loop_consistency_window, 0, 1000,
-                  "keyframe ids", "how far apart two candidate ids may be and still agree")
+          .number("loop_consistency_window", &C::loop_consistency_window, 0, 1000, "keyframe ids",
+                  "how far apart two candidate ids may be and still agree")
           .flag("loop_check_odometry", &C::loop_check_odometry,
                 "reject a verified loop that disagrees with odometry by more than "
                 "loop_max_drift_m + loop_max_drift_ratio * path length (perceptual aliasing)")
@@ -93,8 +92,8 @@ const ConfigSchema<BackendConfig>& BackendConfig::schema() {
           .number("local_max_discrepancy_m", &C::local_max_discrepancy_m, 0.0, 100.0, "m",
                   "reject a local edge whose translation disagrees with the graph's estimate by "
                   "more than this (plus the ratio times the path between the keyframes)")
-          .number("local_max_discrepancy_ratio", &C::local_max_discrepancy_ratio, 0.0, 10.0,
-                  "m/m", "allowed translation disagreement per metre travelled")
+          .number("local_max_discrepancy_ratio", &C::local_max_discrepancy_ratio, 0.0, 10.0, "m/m",
+                  "allowed translation disagreement per metre travelled")
           .number("local_max_discrepancy_rad", &C::local_max_discrepancy_rad, 0.0, 3.2, "rad",
                   "the same for the rotation")
           .number("local_min_sigma_m", &C::local_min_sigma_m, 0.0, 1.0, "m",

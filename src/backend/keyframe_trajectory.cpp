@@ -10,8 +10,7 @@ void KeyframeAnchoredTrajectory::addKeyframe(const KeyframePtr& keyframe) {
   latest_ = keyframe;
 }
 
-void KeyframeAnchoredTrajectory::addFrame(const OdometryResult& result,
-                                          const SE3& T_world_camera) {
+void KeyframeAnchoredTrajectory::addFrame(const OdometryResult& result, const SE3& T_world_camera) {
   if (latest_ == nullptr) return;
   std::int64_t anchor = latest_->id;
   const auto it = keyframes_.find(result.reference_keyframe_id);

@@ -29,12 +29,18 @@ constexpr double kMinSigmaRad = 0.5 * M_PI / 180.0;
 
 const char* loopStatusName(LoopStatus status) {
   switch (status) {
-    case LoopStatus::kLoopFound: return "loop_found";
-    case LoopStatus::kNoCandidate: return "no_candidate";
-    case LoopStatus::kGeometryRejected: return "geometry_rejected";
-    case LoopStatus::kAwaitingConsistency: return "awaiting_consistency";
-    case LoopStatus::kUnsupportedDescriptors: return "unsupported_descriptors";
-    case LoopStatus::kOdometryRejected: return "odometry_rejected";
+    case LoopStatus::kLoopFound:
+      return "loop_found";
+    case LoopStatus::kNoCandidate:
+      return "no_candidate";
+    case LoopStatus::kGeometryRejected:
+      return "geometry_rejected";
+    case LoopStatus::kAwaitingConsistency:
+      return "awaiting_consistency";
+    case LoopStatus::kUnsupportedDescriptors:
+      return "unsupported_descriptors";
+    case LoopStatus::kOdometryRejected:
+      return "odometry_rejected";
   }
   return "unknown";
 }
@@ -77,7 +83,8 @@ void LoopDetector::alignInliers(const FeatureSet& ref, const FeatureSet& query,
   // sub-pixel consistent with the reference keypoint, which is what makes the edge precise.
   const AlignedInliers aligned =
       alignInlierPatches(ref, query, K, ransac.T_ref_curr, matches, ransac.inliers);
-  const std::vector<Eigen::Vector2d> pixels = undistortPixels(aligned.pixels_raw, K, TrackingConfig());
+  const std::vector<Eigen::Vector2d> pixels =
+      undistortPixels(aligned.pixels_raw, K, TrackingConfig());
   for (std::size_t k = 0; k < aligned.match_indices.size(); ++k) {
     matches[aligned.match_indices[k]].pixel_curr = pixels[k];
     matches[aligned.match_indices[k]].pixel_sigma_px = 1.0;
@@ -225,18 +232,16 @@ bool LoopDetector::verify(const FeatureSet& query, const CameraIntrinsics& intri
 }
 
 LoopDetection LoopDetector::processKeyframe(const Keyframe& keyframe,
-                                           const std::vector<LoopDetection>& already_verified) {
+                                            const std::vector<LoopDetection>& already_verified) {
   const auto start = std::chrono::steady_clock::now();
   LoopDetection detection;
   detection.query_id = keyframe.id;
   const auto done = [&]() {
-    detection.time_ms = std::chrono::duration<double, std::milli>(
-                            std::chrono::steady_clock::now() - start)
-                            .count();
+    detection.time_ms =
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
     return detection;
   };
-  if (!hasBinaryDescriptors(keyframe.features) || vocabulary_ == nullptr ||
-      vocabulary_->empty()) {
+  if (!hasBinaryDescriptors(keyframe.features) || vocabulary_ == nullptr || vocabulary_->empty()) {
     detection.status = LoopStatus::kUnsupportedDescriptors;
     groups_.clear();
     return done();
@@ -250,7 +255,8 @@ LoopDetection LoopDetector::processKeyframe(const Keyframe& keyframe,
   // normally sees the same place): the threshold adapts to how distinctive the view is.
   double min_score = config_.loop_min_score;
   if (!entries_.empty()) {
-    min_score = std::max(min_score, config_.loop_min_score_ratio * bowScore(bow, entries_.back().bow));
+    min_score =
+        std::max(min_score, config_.loop_min_score_ratio * bowScore(bow, entries_.back().bow));
   }
   std::vector<Candidate> candidates =
       num_searchable > 0 ? retrieve(bow, num_searchable, min_score) : std::vector<Candidate>();
@@ -261,10 +267,9 @@ LoopDetection LoopDetector::processKeyframe(const Keyframe& keyframe,
 
   double path_length_m = 0.0;
   if (!entries_.empty()) {
-    path_length_m = entries_.back().path_length_m +
-                    (keyframe.T_world_camera.translation() -
-                     entries_.back().T_world_camera.translation())
-                        .norm();
+    path_length_m = entries_.back().path_length_m + (keyframe.T_world_camera.translation() -
+                                                     entries_.back().T_world_camera.translation())
+                                                        .norm();
   }
 
   // Verify the candidates; each verified one joins (or starts) a consistency group.
@@ -276,9 +281,8 @@ LoopDetection LoopDetector::processKeyframe(const Keyframe& keyframe,
     LoopDetection attempt = detection;
     attempt.score = candidate.score;
     const Entry& entry = entries_[static_cast<std::size_t>(candidate.entry)];
-    const auto known = std::find_if(
-        already_verified.begin(), already_verified.end(),
-        [&](const LoopDetection& d) { return d.match_id == entry.id; });
+    const auto known = std::find_if(already_verified.begin(), already_verified.end(),
+                                    [&](const LoopDetection& d) { return d.match_id == entry.id; });
     if (known != already_verified.end() && known->num_inliers >= config_.loop_min_inliers) {
       // Verified moments ago (a local edge): the same images, no need to match them again.
       attempt.match_id = known->match_id;
@@ -359,8 +363,7 @@ LoopDetection LoopDetector::query(const FeatureSet& features, const CameraIntrin
   if (candidates.size() > static_cast<std::size_t>(config_.loop_max_candidates)) {
     candidates.resize(static_cast<std::size_t>(config_.loop_max_candidates));
   }
-  detection.status =
-      candidates.empty() ? LoopStatus::kNoCandidate : LoopStatus::kGeometryRejected;
+  detection.status = candidates.empty() ? LoopStatus::kNoCandidate : LoopStatus::kGeometryRejected;
   for (const Candidate& candidate : candidates) {
     LoopDetection attempt = detection;
     attempt.score = candidate.score;
@@ -383,8 +386,8 @@ std::vector<LoopDetection> LoopDetector::matchLocal(const Keyframe& keyframe,
                                                     const KeyframeFilter& allowed,
                                                     const PosePrior& prior) {
   std::vector<LoopDetection> matches;
-  if (!hasBinaryDescriptors(keyframe.features) || vocabulary_ == nullptr ||
-      vocabulary_->empty() || entries_.empty()) {
+  if (!hasBinaryDescriptors(keyframe.features) || vocabulary_ == nullptr || vocabulary_->empty() ||
+      entries_.empty()) {
     return matches;
   }
   const BowVector bow = vocabulary_->transform(keyframe.features.descriptors);

@@ -47,10 +47,14 @@ Eigen::Matrix3d leftJacobianQ(const Eigen::Vector3d& rho, const Eigen::Vector3d&
 
 const char* optimizationStatusName(OptimizationStatus status) {
   switch (status) {
-    case OptimizationStatus::kConverged: return "converged";
-    case OptimizationStatus::kMaxIterations: return "max_iterations";
-    case OptimizationStatus::kSolverFailure: return "solver_failure";
-    case OptimizationStatus::kInvalidGraph: return "invalid_graph";
+    case OptimizationStatus::kConverged:
+      return "converged";
+    case OptimizationStatus::kMaxIterations:
+      return "max_iterations";
+    case OptimizationStatus::kSolverFailure:
+      return "solver_failure";
+    case OptimizationStatus::kInvalidGraph:
+      return "invalid_graph";
   }
   return "unknown";
 }

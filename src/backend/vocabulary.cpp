@@ -5,7 +5,6 @@
 #include <cstdio>
 #include <cstring>
 #include <fstream>
-#include <string>
 #include <istream>
 #include <limits>
 #include <map>
@@ -13,6 +12,7 @@
 #include <random>
 #include <set>
 #include <sstream>
+#include <string>
 
 #include "slamd/common/file_io.hpp"
 
@@ -67,7 +67,8 @@ bool isBinary256(const cv::Mat& descriptors) {
 }
 
 // Bitwise majority of the members' descriptors (ties give 0).
-BinaryDescriptor majority(const std::vector<BinaryDescriptor>& data, const std::vector<int>& members) {
+BinaryDescriptor majority(const std::vector<BinaryDescriptor>& data,
+                          const std::vector<int>& members) {
   std::array<int, 256> counts{};
   for (int m : members) {
     for (int w = 0; w < 4; ++w) {
@@ -102,15 +103,16 @@ void Vocabulary::build(int node, const std::vector<BinaryDescriptor>& data,
   std::mt19937_64 rng(seed + static_cast<std::uint64_t>(node) * 7919u);
   // k-means++ seeding with squared Hamming distances.
   std::vector<BinaryDescriptor> centres;
-  centres.push_back(data[static_cast<std::size_t>(
-      members[std::uniform_int_distribution<int>(0, n - 1)(rng)])]);
+  centres.push_back(
+      data[static_cast<std::size_t>(members[std::uniform_int_distribution<int>(0, n - 1)(rng)])]);
   std::vector<double> nearest_sq(static_cast<std::size_t>(n),
                                  std::numeric_limits<double>::infinity());
   while (static_cast<int>(centres.size()) < branching) {
     double total = 0.0;
     for (int i = 0; i < n; ++i) {
       const double d = hammingDistance(data[static_cast<std::size_t>(members[i])], centres.back());
-      nearest_sq[static_cast<std::size_t>(i)] = std::min(nearest_sq[static_cast<std::size_t>(i)], d * d);
+      nearest_sq[static_cast<std::size_t>(i)] =
+          std::min(nearest_sq[static_cast<std::size_t>(i)], d * d);
       total += nearest_sq[static_cast<std::size_t>(i)];
     }
     if (total <= 0.0) break;  // fewer distinct descriptors than clusters
@@ -149,12 +151,14 @@ void Vocabulary::build(int node, const std::vector<BinaryDescriptor>& data,
     }
     clusters.assign(static_cast<std::size_t>(k), {});
     for (int i = 0; i < n; ++i) {
-      clusters[static_cast<std::size_t>(assignment[static_cast<std::size_t>(i)])].push_back(members[i]);
+      clusters[static_cast<std::size_t>(assignment[static_cast<std::size_t>(i)])].push_back(
+          members[i]);
     }
     if (!changed && iteration > 0) break;
     for (int c = 0; c < k; ++c) {
       if (!clusters[static_cast<std::size_t>(c)].empty()) {
-        centres[static_cast<std::size_t>(c)] = majority(data, clusters[static_cast<std::size_t>(c)]);
+        centres[static_cast<std::size_t>(c)] =
+            majority(data, clusters[static_cast<std::size_t>(c)]);
       }
     }
   }
@@ -202,8 +206,8 @@ Vocabulary Vocabulary::train(const std::vector<cv::Mat>& image_descriptors, int 
   }
   vocabulary.idf_.resize(images_with_word.size());
   for (std::size_t w = 0; w < images_with_word.size(); ++w) {
-    vocabulary.idf_[w] = std::log(static_cast<double>(num_images) /
-                                  std::max(1, images_with_word[w]));
+    vocabulary.idf_[w] =
+        std::log(static_cast<double>(num_images) / std::max(1, images_with_word[w]));
   }
   return vocabulary;
 }
@@ -341,8 +345,8 @@ bool Vocabulary::read(std::istream& in, std::string* error) {
                            std::to_string(num_words) + ")");
   }
   // Each node takes at least 40 bytes, each word 8: the declared size must fit both.
-  const std::uint64_t min_size = static_cast<std::uint64_t>(num_nodes) * 40u +
-                                 static_cast<std::uint64_t>(num_words) * 8u;
+  const std::uint64_t min_size =
+      static_cast<std::uint64_t>(num_nodes) * 40u + static_cast<std::uint64_t>(num_words) * 8u;
   const std::uint64_t max_size = min_size + static_cast<std::uint64_t>(num_nodes) * 4u;
   if (payload_size < min_size || payload_size > max_size) {
     return fail(error, "inconsistent payload size " + std::to_string(payload_size));
@@ -354,7 +358,8 @@ bool Vocabulary::read(std::istream& in, std::string* error) {
   std::uint64_t checksum = 0;
   while (payload.size() < payload_size) {
     const std::size_t offset = payload.size();
-    const auto piece = static_cast<std::size_t>(std::min<std::uint64_t>(kPiece, payload_size - offset));
+    const auto piece =
+        static_cast<std::size_t>(std::min<std::uint64_t>(kPiece, payload_size - offset));
     payload.resize(offset + piece);
     if (!in.read(payload.data() + offset, static_cast<std::streamsize>(piece))) break;
   }

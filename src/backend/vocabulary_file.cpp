@@ -33,12 +33,9 @@ std::shared_ptr<const Vocabulary> loadVocabulary(const BackendConfig& config) {
              : " (write one with slamd-vocabulary --out FILE)"));
   }
   if (vocabulary->empty()) throw VocabularyError(path + ": the vocabulary has no words");
-  SLAMD_LOG_INFO("backend") << "vocabulary loaded from " << path << ": " << vocabulary->numWords()
-                            << " words in "
-                            << std::chrono::duration<double>(std::chrono::steady_clock::now() -
-                                                             start)
-                                   .count()
-                            << " s";
+  SLAMD_LOG_INFO("backend")
+      << "vocabulary loaded from " << path << ": " << vocabulary->numWords() << " words in "
+      << std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count() << " s";
   return vocabulary;
 }
 

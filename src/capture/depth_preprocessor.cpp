@@ -2,8 +2,9 @@
 
 #include <cmath>
 #include <limits>
-#include <opencv2/core.hpp>
 #include <vector>
+
+#include <opencv2/core.hpp>
 
 #include "slamd/common/time.hpp"
 

@@ -6,9 +6,10 @@
 #include <cstdlib>
 #include <filesystem>
 #include <mutex>
-#include <opencv2/imgproc.hpp>
 #include <sstream>
 #include <thread>
+
+#include <opencv2/imgproc.hpp>
 
 #include "slamd/common/log.hpp"
 
@@ -368,10 +369,12 @@ void openDevice(OpenNi2Source::Kind kind, const std::string& uri, const OpenNi2C
     s.depth_registered = registration == openni::IMAGE_REGISTRATION_DEPTH_TO_COLOR;
   }
   if (kind == OpenNi2Source::Kind::kFile) {
-    SLAMD_LOG_INFO(kComponent)
-        << "recording " << uri << ": " << s.depth_frames_total << " depth and "
-        << s.color_frames_total << " colour frames; depth registered to colour: "
-        << (!s.depth_registered ? "not recorded" : *s.depth_registered ? "yes" : "no");
+    SLAMD_LOG_INFO(kComponent) << "recording " << uri << ": " << s.depth_frames_total
+                               << " depth and " << s.color_frames_total
+                               << " colour frames; depth registered to colour: "
+                               << (!s.depth_registered   ? "not recorded"
+                                   : *s.depth_registered ? "yes"
+                                                         : "no");
   }
   s.last_depth_index = -1;
   s.last_color_index = -1;

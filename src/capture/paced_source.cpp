@@ -51,8 +51,7 @@ void PacedSource::open() {
   }
 }
 
-std::chrono::steady_clock::time_point PacedSource::dueTime(Utime utime,
-                                                         std::uint64_t index) const {
+std::chrono::steady_clock::time_point PacedSource::dueTime(Utime utime, std::uint64_t index) const {
   const double elapsed_s = config_.mode == PacingMode::kRealTime
                                ? utimeToSeconds(utime - first_utime_) / config_.speed
                                : static_cast<double>(index) / config_.rate_hz;

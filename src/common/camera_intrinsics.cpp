@@ -46,8 +46,7 @@ std::string CameraIntrinsics::validationError() const {
 
 bool CameraIntrinsics::operator==(const CameraIntrinsics& o) const {
   return fx == o.fx && fy == o.fy && cx == o.cx && cy == o.cy && width == o.width &&
-         height == o.height && distortion_model == o.distortion_model &&
-         distortion == o.distortion;
+         height == o.height && distortion_model == o.distortion_model && distortion == o.distortion;
 }
 
 }  // namespace slamd

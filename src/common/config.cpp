@@ -103,8 +103,8 @@ Config Config::fromFile(const std::string& path) {
   if (status.type() != std::filesystem::file_type::regular) {
     throw ConfigError("configuration file '" + path + "' is not a regular file (" +
                       (status.type() == std::filesystem::file_type::directory ? "a directory"
-                                                                               : "a device, FIFO "
-                                                                                 "or socket") +
+                                                                              : "a device, FIFO "
+                                                                                "or socket") +
                       ")");
   }
   std::ifstream file(path, std::ios::binary);
@@ -175,8 +175,9 @@ double Config::getDouble(const std::string& key, double default_value, double mi
   double value = default_value;
   if (const std::string* raw = rawValue(key)) {
     if (!parseDouble(*raw, value) || !std::isfinite(value)) {
-      fail(key, *raw, "expected a number in [" + formatDouble(min_value) + ", " +
-                          formatDouble(max_value) + "]");
+      fail(key, *raw,
+           "expected a number in [" + formatDouble(min_value) + ", " + formatDouble(max_value) +
+               "]");
     }
   }
   if (value < min_value || value > max_value) {
@@ -247,9 +248,9 @@ std::vector<double> Config::getDoubleList(const std::string& key,
                                           std::size_t required_length) {
   std::vector<double> values = default_value;
   const std::string* raw = rawValue(key);
-  const std::string length_text =
-      required_length ? "a list of " + std::to_string(required_length) + " numbers"
-                      : "a list of numbers [a, b, ...]";
+  const std::string length_text = required_length
+                                      ? "a list of " + std::to_string(required_length) + " numbers"
+                                      : "a list of numbers [a, b, ...]";
   if (raw) {
     std::string text = trim(*raw);
     if (text.size() < 2 || text.front() != '[' || text.back() != ']') {

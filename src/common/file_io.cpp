@@ -99,8 +99,8 @@ bool writeThrough(int fd, const std::function<bool(std::ostream&)>& writer, std:
 
 std::string temporaryPathFor(const std::string& path) { return path + ".tmp"; }
 
-bool writeFileAtomically(const std::string& path,
-                         const std::function<bool(std::ostream&)>& writer, std::string* error) {
+bool writeFileAtomically(const std::string& path, const std::function<bool(std::ostream&)>& writer,
+                         std::string* error) {
   const std::string tmp = temporaryPathFor(path);
   const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
   if (fd < 0) return fail(error, "cannot create " + tmp + ": " + errnoText(errno));
@@ -205,7 +205,7 @@ bool readFileBytes(const std::string& path, std::vector<std::uint8_t>& bytes, st
     error = path + " is not a regular file (" +
             (status.type() == std::filesystem::file_type::directory ? std::string("a directory")
              : status.type() == std::filesystem::file_type::fifo    ? std::string("a FIFO")
-                                                                    : std::string("a special file")) +
+                                                                 : std::string("a special file")) +
             ")";
     return false;
   }

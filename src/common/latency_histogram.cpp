@@ -49,8 +49,8 @@ LatencySummary LatencyHistogram::summarize(const std::vector<std::uint64_t>& cou
     if (counts[i]) {
       last_nonempty = static_cast<int>(i);
       // Geometric centre of the bucket as its representative value.
-      weighted_sum_ns += static_cast<double>(counts[i]) *
-                         bucketLowerNs(static_cast<int>(i)) * std::exp2(0.5 / kBucketsPerOctave);
+      weighted_sum_ns += static_cast<double>(counts[i]) * bucketLowerNs(static_cast<int>(i)) *
+                         std::exp2(0.5 / kBucketsPerOctave);
     }
   }
   if (summary.count == 0) return summary;

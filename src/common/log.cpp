@@ -37,7 +37,8 @@ LogLevel parseLogLevel(const std::string& text) {
   if (text == "info") return LogLevel::kInfo;
   if (text == "warn") return LogLevel::kWarn;
   if (text == "error") return LogLevel::kError;
-  throw std::invalid_argument("log level '" + text + "': allowed values are debug, info, warn, error");
+  throw std::invalid_argument("log level '" + text +
+                              "': allowed values are debug, info, warn, error");
 }
 
 LogLine::LogLine(LogLevel level, const char* component)

@@ -41,8 +41,10 @@ std::string ProgramOptions::usage() const {
   for (const auto& name : order_) {
     const OptionSpec& spec = specs_.at(name);
     std::string left = "  --" + name + (spec.value_name.empty() ? "" : " " + spec.value_name);
-    if (left.size() < 34) left.resize(34, ' ');
-    else left += "\n" + std::string(34, ' ');
+    if (left.size() < 34)
+      left.resize(34, ' ');
+    else
+      left += "\n" + std::string(34, ' ');
     out << left << spec.help;
     if (!spec.default_value.empty()) out << " (default: " << spec.default_value << ")";
     out << "\n";
@@ -94,7 +96,8 @@ bool ProgramOptions::parse(int argc, const char* const* argv) {
     return false;
   }
   if (positional_.size() < positional_min_ || positional_.size() > positional_max_) {
-    if (positional_names_.empty()) return usage_error("unexpected argument '" + positional_[0] + "'");
+    if (positional_names_.empty())
+      return usage_error("unexpected argument '" + positional_[0] + "'");
     return usage_error("expected " + positional_names_);
   }
   try {

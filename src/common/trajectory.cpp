@@ -68,8 +68,8 @@ std::string formatTumPose(const StampedPose& pose) {
   Eigen::Quaterniond q(pose.T_world_camera.linear());
   q.normalize();
   char buffer[256];
-  std::snprintf(buffer, sizeof(buffer), "%.6f %.9f %.9f %.9f %.9f %.9f %.9f %.9f",
-                pose.timestamp_s, t.x(), t.y(), t.z(), q.x(), q.y(), q.z(), q.w());
+  std::snprintf(buffer, sizeof(buffer), "%.6f %.9f %.9f %.9f %.9f %.9f %.9f %.9f", pose.timestamp_s,
+                t.x(), t.y(), t.z(), q.x(), q.y(), q.z(), q.w());
   return buffer;
 }
 

@@ -75,7 +75,8 @@ std::vector<Line> splitLines(const std::string& text) {
     if (marker == "...") break;
     std::size_t indent = 0;
     while (indent < raw.size() && raw[indent] == ' ') ++indent;
-    if (indent < raw.size() && raw[indent] == '\t') fail(number, "a tab indents the line (YAML indents with spaces)");
+    if (indent < raw.size() && raw[indent] == '\t')
+      fail(number, "a tab indents the line (YAML indents with spaces)");
     Line line;
     line.number = number;
     line.indent = static_cast<int>(indent);
@@ -111,7 +112,8 @@ std::string scalar(const std::string& text, int line) {
     return value;
   }
   if (std::string("&*!|>{}[]@`").find(first) != std::string::npos) {
-    fail(line, std::string("'") + first + "' starts a YAML construct slamd's configuration does not use");
+    fail(line,
+         std::string("'") + first + "' starts a YAML construct slamd's configuration does not use");
   }
   return text;
 }
@@ -122,14 +124,16 @@ class Reader {
 
   std::map<std::string, std::string> read() {
     if (!lines_.empty()) readMap(lines_.front().indent, "", 1);
-    if (next_ < lines_.size()) fail(lines_[next_].number, "indentation does not match any key above");
+    if (next_ < lines_.size())
+      fail(lines_[next_].number, "indentation does not match any key above");
     return std::move(values_);
   }
 
  private:
   void readMap(int indent, const std::string& prefix, int depth) {
     if (depth > kMaxNesting) {
-      fail(lines_[next_].number, "nested more than " + std::to_string(kMaxNesting) + " levels deep");
+      fail(lines_[next_].number,
+           "nested more than " + std::to_string(kMaxNesting) + " levels deep");
     }
     while (next_ < lines_.size() && lines_[next_].indent >= indent) {
       const Line& line = lines_[next_];
@@ -144,8 +148,8 @@ class Reader {
       if (values_.count(full_key) != 0) fail(line.number, "'" + full_key + "' is given twice");
       ++next_;
       if (!rest.empty()) {
-        values_[full_key] = rest.front() == '[' ? flowSequence(rest, line.number)
-                                                : scalar(rest, line.number);
+        values_[full_key] =
+            rest.front() == '[' ? flowSequence(rest, line.number) : scalar(rest, line.number);
       } else if (next_ < lines_.size() && lines_[next_].indent >= indent &&
                  isListItem(lines_[next_])) {
         values_[full_key] = blockSequence(lines_[next_].indent);
@@ -165,8 +169,8 @@ class Reader {
   static std::size_t keyEnd(const Line& line) {
     const std::string& text = line.content;
     std::size_t i = 0;
-    while (i < text.size() && (std::isalnum(static_cast<unsigned char>(text[i])) || text[i] == '_' ||
-                               text[i] == '-')) {
+    while (i < text.size() && (std::isalnum(static_cast<unsigned char>(text[i])) ||
+                               text[i] == '_' || text[i] == '-')) {
       ++i;
     }
     if (i == 0 || i >= text.size() || text[i] != ':' ||

@@ -4,8 +4,7 @@ namespace slamd {
 
 const ConfigSchema<LcmConfig>& LcmConfig::schema() {
   static const auto table = ConfigSchema<LcmConfig>("lcm").text(
-      "url", &LcmConfig::url,
-      "LCM URL (--lcm-url); empty = $LCM_DEFAULT_URL or LCM's default");
+      "url", &LcmConfig::url, "LCM URL (--lcm-url); empty = $LCM_DEFAULT_URL or LCM's default");
   return table;
 }
 

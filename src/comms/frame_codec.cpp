@@ -41,8 +41,8 @@ std::vector<std::uint8_t> encodeImage(const char* extension, const cv::Mat& imag
 }
 
 // Decodes a compressed image, checking that it decoded to the expected type and size.
-cv::Mat decodeImage(const std::vector<std::uint8_t>& bytes, int flags, int expected_type,
-                    int width, int height, const std::string& what) {
+cv::Mat decodeImage(const std::vector<std::uint8_t>& bytes, int flags, int expected_type, int width,
+                    int height, const std::string& what) {
   if (bytes.empty()) throw FrameDecodeError(what + ": no bytes");
   checkEncodedImageSize(bytes.data(), bytes.size(), width, height, what);
   cv::Mat image;
@@ -55,13 +55,13 @@ cv::Mat decodeImage(const std::vector<std::uint8_t>& bytes, int flags, int expec
   }
   if (image.empty()) throw FrameDecodeError(what + ": corrupt or truncated image data");
   if (image.type() != expected_type) {
-    throw FrameDecodeError(what + ": decoded to " + cv::typeToString(image.type()) +
-                           ", expected " + cv::typeToString(expected_type));
+    throw FrameDecodeError(what + ": decoded to " + cv::typeToString(image.type()) + ", expected " +
+                           cv::typeToString(expected_type));
   }
   if (image.cols != width || image.rows != height) {
     throw FrameDecodeError(what + ": image is " + std::to_string(image.cols) + "x" +
-                           std::to_string(image.rows) + ", message says " +
-                           std::to_string(width) + "x" + std::to_string(height));
+                           std::to_string(image.rows) + ", message says " + std::to_string(width) +
+                           "x" + std::to_string(height));
   }
   return image;
 }
@@ -94,7 +94,7 @@ std::optional<cv::Size> encodedImageSize(const std::uint8_t* data, std::size_t s
       ++pos;
       continue;
     }
-    if (marker == 0xD9 || marker == 0xDA) return std::nullopt;  // end of image, or scan data
+    if (marker == 0xD9 || marker == 0xDA) return std::nullopt;   // end of image, or scan data
     if ((marker >= 0xD0 && marker <= 0xD7) || marker == 0x01) {  // no length field
       pos += 2;
       continue;
@@ -122,8 +122,7 @@ void checkEncodedImageSize(const std::uint8_t* data, std::size_t size, int width
   if (declared->width != width || declared->height != height) {
     throw FrameDecodeError(what + ": image header says " + std::to_string(declared->width) + "x" +
                            std::to_string(declared->height) + ", message says " +
-                           std::to_string(width) + "x" + std::to_string(height) +
-                           " (not decoded)");
+                           std::to_string(width) + "x" + std::to_string(height) + " (not decoded)");
   }
 }
 
@@ -181,8 +180,8 @@ Enum parseEncoding(const EnumNames<Enum>& names, const std::string& text, const 
     if (text == name.text) return name.value;
     allowed += (allowed.empty() ? "" : ", ") + std::string(name.text);
   }
-  throw std::invalid_argument(std::string(what) + " encoding '" + text +
-                              "': allowed values are " + allowed);
+  throw std::invalid_argument(std::string(what) + " encoding '" + text + "': allowed values are " +
+                              allowed);
 }
 
 }  // namespace
@@ -211,9 +210,9 @@ std::vector<std::uint8_t> zlibDecompress(const std::uint8_t* data, std::size_t s
   uLongf out_size = static_cast<uLongf>(expected_size);
   const int status = uncompress(out.data(), &out_size, data, static_cast<uLong>(size));
   if (status != Z_OK) {
-    throw FrameDecodeError(std::string("zlib depth: ") +
-                           (status == Z_BUF_ERROR ? "more data than the image size"
-                                                  : "corrupt or truncated stream"));
+    throw FrameDecodeError(std::string("zlib depth: ") + (status == Z_BUF_ERROR
+                                                              ? "more data than the image size"
+                                                              : "corrupt or truncated stream"));
   }
   if (out_size != expected_size) {
     throw FrameDecodeError("zlib depth: " + std::to_string(out_size) + " bytes, expected " +
@@ -282,8 +281,8 @@ slamd::rgbd_frame_t encodeRgbdFrame(const RgbdFrame& frame, const FrameEncodeOpt
       break;
     case DepthEncoding::kZlibU16:
       msg.depth_encoding = slamd::rgbd_frame_t::DEPTH_ZLIB_U16;
-      msg.depth_data = zlibCompress(raw.datastart, static_cast<std::size_t>(raw.dataend - raw.datastart),
-                                    Z_BEST_SPEED);
+      msg.depth_data = zlibCompress(
+          raw.datastart, static_cast<std::size_t>(raw.dataend - raw.datastart), Z_BEST_SPEED);
       break;
   }
   msg.depth_nbytes = static_cast<int32_t>(msg.depth_data.size());
@@ -338,9 +337,9 @@ RgbdFrame decodeRgbdFrame(const slamd::rgbd_frame_t& msg) {
     }
     case slamd::rgbd_frame_t::COLOR_JPEG:
     case slamd::rgbd_frame_t::COLOR_PNG:
-      frame.color_bgr = decodeImage(msg.color_data, cv::IMREAD_COLOR, CV_8UC3, msg.width,
-                                    msg.height,
-                                    what + " " + colorEncodingName(msg.color_encoding) + " colour");
+      frame.color_bgr =
+          decodeImage(msg.color_data, cv::IMREAD_COLOR, CV_8UC3, msg.width, msg.height,
+                      what + " " + colorEncodingName(msg.color_encoding) + " colour");
       break;
     default:
       throw FrameDecodeError(what + ": unknown colour encoding " +
@@ -358,9 +357,9 @@ RgbdFrame decodeRgbdFrame(const slamd::rgbd_frame_t& msg) {
                         what + " png depth");
       break;
     case slamd::rgbd_frame_t::DEPTH_ZLIB_U16: {
-      const auto bytes =
-          zlibDecompress(msg.depth_data.data(), msg.depth_data.size(), pixels * 2);
-      raw = rawU16FromBytes(bytes.data(), bytes.size(), msg.width, msg.height, what + " zlib depth");
+      const auto bytes = zlibDecompress(msg.depth_data.data(), msg.depth_data.size(), pixels * 2);
+      raw =
+          rawU16FromBytes(bytes.data(), bytes.size(), msg.width, msg.height, what + " zlib depth");
       break;
     }
     default:
@@ -429,15 +428,16 @@ RgbdFrame decodeKinectFrame(const kinect::frame_msg_t& msg, const CameraIntrinsi
     case kinect::image_msg_t::VIDEO_RGB: {
       if (msg.image.image_data.size() != pixels * 3) {
         throw FrameDecodeError(what + ": " + std::to_string(msg.image.image_data.size()) +
-                               " bytes of VIDEO_RGB colour, expected " + std::to_string(pixels * 3));
+                               " bytes of VIDEO_RGB colour, expected " +
+                               std::to_string(pixels * 3));
       }
       cv::Mat rgb(height, width, CV_8UC3, const_cast<std::uint8_t*>(msg.image.image_data.data()));
       cv::cvtColor(rgb, frame.color_bgr, cv::COLOR_RGB2BGR);
       break;
     }
     case kinect::image_msg_t::VIDEO_RGB_JPEG:
-      frame.color_bgr = decodeImage(msg.image.image_data, cv::IMREAD_COLOR, CV_8UC3, width,
-                                    height, what + " VIDEO_RGB_JPEG colour");
+      frame.color_bgr = decodeImage(msg.image.image_data, cv::IMREAD_COLOR, CV_8UC3, width, height,
+                                    what + " VIDEO_RGB_JPEG colour");
       break;
     default:
       throw FrameDecodeError(what + ": colour format " +
@@ -455,8 +455,8 @@ RgbdFrame decodeKinectFrame(const kinect::frame_msg_t& msg, const CameraIntrinsi
                              std::to_string(msg.depth.uncompressed_size) + ", expected " +
                              std::to_string(pixels * 2));
     }
-    const auto bytes = zlibDecompress(msg.depth.depth_data.data(), msg.depth.depth_data.size(),
-                                      pixels * 2);
+    const auto bytes =
+        zlibDecompress(msg.depth.depth_data.data(), msg.depth.depth_data.size(), pixels * 2);
     raw = rawU16FromBytes(bytes.data(), bytes.size(), width, height, what + " zlib depth");
   } else if (msg.depth.compression == kinect::depth_msg_t::COMPRESSION_NONE) {
     raw = rawU16FromBytes(msg.depth.depth_data.data(), msg.depth.depth_data.size(), width, height,

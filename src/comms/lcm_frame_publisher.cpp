@@ -11,7 +11,8 @@ namespace {
 
 const EnumNames<bool> kPublishFormatNames = {
     {false, "rgbd", "slamd.rgbd_frame_t (with intrinsics)"},
-    {true, "kinect", "kinect.frame_msg_t: JPEG colour when color = jpeg, else raw; zlib depth "
+    {true, "kinect",
+     "kinect.frame_msg_t: JPEG colour when color = jpeg, else raw; zlib depth "
      "when depth = zlib, else raw millimetres"},
 };
 
@@ -23,14 +24,18 @@ const ConfigSchema<LcmFramePublisherConfig>& LcmFramePublisherConfig::schema() {
       ConfigSchema<C>("capture.publish")
           .text("channel", &C::channel, "channel of republished frames; not empty")
           .choice("format", &C::kinect_format, kPublishFormatNames, "message type")
-          .choice("color", [](auto& c) -> auto& { return c.encode.color; },
-                  colorEncodingNames(), "colour encoding")
-          .number("jpeg_quality", [](auto& c) -> auto& { return c.encode.jpeg_quality; }, 1, 100,
-                  "", "JPEG quality")
-          .choice("depth", [](auto& c) -> auto& { return c.encode.depth; },
-                  depthEncodingNames(), "depth encoding")
-          .number("depth_scale", [](auto& c) -> auto& { return c.encode.depth_scale; }, 1.0,
-                  1e5, "raw units per metre", "depth units of the encoded image (1000: mm)");
+          .choice(
+              "color", [](auto& c) -> auto& { return c.encode.color; }, colorEncodingNames(),
+              "colour encoding")
+          .number(
+              "jpeg_quality", [](auto& c) -> auto& { return c.encode.jpeg_quality; }, 1, 100, "",
+              "JPEG quality")
+          .choice(
+              "depth", [](auto& c) -> auto& { return c.encode.depth; }, depthEncodingNames(),
+              "depth encoding")
+          .number(
+              "depth_scale", [](auto& c) -> auto& { return c.encode.depth_scale; }, 1.0, 1e5,
+              "raw units per metre", "depth units of the encoded image (1000: mm)");
   return table;
 }
 

@@ -3,9 +3,10 @@
 #include <pthread.h>
 
 #include <cstdio>
+#include <sstream>
+
 #include <lcm/lcm-cpp.hpp>
 #include <opencv2/imgproc.hpp>
-#include <sstream>
 
 #include "slamd/capture/image_io.hpp"
 #include "slamd/common/log.hpp"

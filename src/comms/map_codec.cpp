@@ -119,9 +119,8 @@ std::size_t applyMapUpdate(const MapUpdate& update, octomap::OcTree& tree) {
       continue;
     }
     octomap::OcTreeKey key;
-    if (!tree.coordToKeyChecked(octomap::point3d(voxel.center_m.x(), voxel.center_m.y(),
-                                                 voxel.center_m.z()),
-                                key)) {
+    if (!tree.coordToKeyChecked(
+            octomap::point3d(voxel.center_m.x(), voxel.center_m.y(), voxel.center_m.z()), key)) {
       continue;
     }
     tree.setNodeValue(key, voxel.log_odds, true);

@@ -18,9 +18,9 @@ slamd::status_t StatusBuilder::build(Utime now_utime, std::int64_t now_steady_ns
                                      const std::vector<StageStats>& stages,
                                      const std::vector<std::uint64_t>& end_to_end_buckets,
                                      const StatusExtras& extras) {
-  const double interval_s =
-      previous_steady_ns_ > 0 ? static_cast<double>(now_steady_ns - previous_steady_ns_) * 1e-9
-                              : 0.0;
+  const double interval_s = previous_steady_ns_ > 0
+                                ? static_cast<double>(now_steady_ns - previous_steady_ns_) * 1e-9
+                                : 0.0;
   slamd::status_t status;
   status.utime = now_utime;
   for (const StageStats& stage : stages) {
@@ -30,8 +30,8 @@ slamd::status_t StatusBuilder::build(Utime now_utime, std::int64_t now_steady_ns
     out.rate_hz = interval_s > 0.0
                       ? static_cast<double>(stage.processed - previous.processed) / interval_s
                       : 0.0;
-    const LatencySummary latency =
-        LatencyHistogram::summarize(histogramDelta(stage.latency_buckets, previous.latency_buckets));
+    const LatencySummary latency = LatencyHistogram::summarize(
+        histogramDelta(stage.latency_buckets, previous.latency_buckets));
     out.latency_p50_ms = latency.p50_ms;
     out.latency_p95_ms = latency.p95_ms;
     out.latency_p99_ms = latency.p99_ms;
@@ -92,8 +92,7 @@ std::string renderStatusTable(const status_t& status, std::uint64_t malformed) {
                 "%.2f ms\n",
                 status.end_to_end_p50_ms, status.end_to_end_p95_ms, status.end_to_end_p99_ms);
   out << line;
-  out << "tracking: "
-      << trackingStateName(static_cast<TrackingState>(status.tracking_state))
+  out << "tracking: " << trackingStateName(static_cast<TrackingState>(status.tracking_state))
       << "   map: " << status.map_occupied_voxels << " occupied / " << status.map_total_voxels
       << " voxels   back end: " << status.num_keyframes << " keyframes, " << status.num_loops
       << " loops, " << status.num_relocalizations << " relocalisations\n";

@@ -48,7 +48,9 @@ void writeNode(JsonWriter& json, const Node& node) {
 
 void flatten(const cv::FileNode& node, const std::string& path,
              std::map<std::string, double>& out) {
-  const auto join = [&](const std::string& part) { return path.empty() ? part : path + "." + part; };
+  const auto join = [&](const std::string& part) {
+    return path.empty() ? part : path + "." + part;
+  };
   if (node.isMap()) {
     for (auto it = node.begin(); it != node.end(); ++it) {
       const cv::FileNode child = *it;
@@ -171,8 +173,8 @@ void MetricsReport::print(std::ostream& out) const { out << toJson() << std::end
 std::map<std::string, double> flattenJsonNumbers(const std::string& json_text) {
   std::map<std::string, double> out;
   try {
-    cv::FileStorage storage(json_text, cv::FileStorage::READ | cv::FileStorage::MEMORY |
-                                           cv::FileStorage::FORMAT_JSON);
+    cv::FileStorage storage(
+        json_text, cv::FileStorage::READ | cv::FileStorage::MEMORY | cv::FileStorage::FORMAT_JSON);
     const cv::FileNode root = storage.root();
     if (!root.isMap()) throw std::runtime_error("not a JSON object");
     flatten(root, "", out);

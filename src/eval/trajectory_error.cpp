@@ -1,7 +1,5 @@
 #include "slamd/eval/trajectory_error.hpp"
 
-#include "slamd/common/timestamp_association.hpp"
-
 #include <algorithm>
 #include <cmath>
 #include <map>
@@ -13,6 +11,7 @@
 #include <Eigen/SVD>
 
 #include "slamd/common/latency_histogram.hpp"
+#include "slamd/common/timestamp_association.hpp"
 
 namespace slamd::eval {
 namespace {
@@ -86,8 +85,8 @@ std::vector<AssociatedPair> associateTimestamps(const std::vector<double>& first
   const auto [first_keys, first_indices] = uniqueKeys(first_s);
   const auto [second_keys, second_indices] = uniqueKeys(second_s);
   std::vector<AssociatedPair> pairs;
-  for (const auto& [i, j] : slamd::associateTimestamps(first_keys, second_keys,
-                                                       options.max_difference_s, options.offset_s)) {
+  for (const auto& [i, j] : slamd::associateTimestamps(
+           first_keys, second_keys, options.max_difference_s, options.offset_s)) {
     pairs.push_back({first_indices[i], second_indices[j]});
   }
   return pairs;

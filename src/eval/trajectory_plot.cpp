@@ -104,7 +104,8 @@ double niceStep(double span, int count) {
 std::string tickLabel(double value, double step) {
   const int decimals = std::max(0, static_cast<int>(std::ceil(-std::log10(step) - 1e-9)));
   char buffer[32];
-  std::snprintf(buffer, sizeof(buffer), "%.*f", decimals, std::abs(value) < step * 1e-6 ? 0.0 : value);
+  std::snprintf(buffer, sizeof(buffer), "%.*f", decimals,
+                std::abs(value) < step * 1e-6 ? 0.0 : value);
   return buffer;
 }
 
@@ -163,8 +164,8 @@ void drawAxes(cv::Mat& image, const Panel& panel, const std::string& x_label,
 cv::Scalar errorColour(double t) {
   t = std::clamp(t, 0.0, 1.0);
   const cv::Vec3d green(60, 175, 40), yellow(0, 200, 240), red(30, 30, 215);
-  const cv::Vec3d c = t < 0.5 ? green + (yellow - green) * (t * 2.0)
-                              : yellow + (red - yellow) * ((t - 0.5) * 2.0);
+  const cv::Vec3d c =
+      t < 0.5 ? green + (yellow - green) * (t * 2.0) : yellow + (red - yellow) * ((t - 0.5) * 2.0);
   return {c[0], c[1], c[2]};
 }
 
@@ -188,7 +189,8 @@ std::string fixed(double value, int decimals) {
 // Consecutive samples further apart in time than this are not joined (tracking gaps).
 double gapThreshold(const std::vector<double>& times_s) {
   std::vector<double> intervals;
-  for (std::size_t i = 0; i + 1 < times_s.size(); ++i) intervals.push_back(times_s[i + 1] - times_s[i]);
+  for (std::size_t i = 0; i + 1 < times_s.size(); ++i)
+    intervals.push_back(times_s[i + 1] - times_s[i]);
   if (intervals.empty()) return 1.0;
   std::nth_element(intervals.begin(), intervals.begin() + intervals.size() / 2, intervals.end());
   return std::max(5.0 * intervals[intervals.size() / 2], 0.2);
@@ -197,8 +199,8 @@ double gapThreshold(const std::vector<double>& times_s) {
 void drawColourBar(cv::Mat& image, cv::Rect rect, double max_value, const std::string& unit) {
   for (int row = 0; row < rect.height; ++row) {
     const double t = 1.0 - static_cast<double>(row) / (rect.height - 1);
-    cv::line(image, {rect.x, rect.y + row}, {rect.x + rect.width - 1, rect.y + row},
-             errorColour(t), 1);
+    cv::line(image, {rect.x, rect.y + row}, {rect.x + rect.width - 1, rect.y + row}, errorColour(t),
+             1);
   }
   cv::rectangle(image, rect, kAxis, 1);
   const double step = niceStep(max_value, 5);
@@ -286,19 +288,17 @@ cv::Mat renderAtePlot(const AteResult& ate, const PlotOptions& options, Alignmen
   const int side = (hi - lo)(a) >= (hi - lo)(b) ? a : b;
 
   // Header: title, statistics, subtitle.
-  const std::string title =
-      options.title.empty()
-          ? std::string("Absolute trajectory error (") + alignmentModelName(alignment) +
-                " alignment)"
-          : options.title;
+  const std::string title = options.title.empty()
+                                ? std::string("Absolute trajectory error (") +
+                                      alignmentModelName(alignment) + " alignment)"
+                                : options.title;
   text(image, title, {30.0, 34.0}, 0.85, kBlack, Anchor::kLeft, 2);
   const double k = unit.per_metre;
   const std::string u = unit.name;
   const std::string stats = std::to_string(s.count) + " pairs   RMSE " + fixed(s.rmse * k, 2) +
                             " " + u + "   mean " + fixed(s.mean * k, 2) + "   median " +
-                            fixed(s.median * k, 2) + "   std " + fixed(s.std * k, 2) +
-                            "   min " + fixed(s.min * k, 2) + "   max " +
-                            fixed(s.max * k, 2) + " " + u;
+                            fixed(s.median * k, 2) + "   std " + fixed(s.std * k, 2) + "   min " +
+                            fixed(s.min * k, 2) + "   max " + fixed(s.max * k, 2) + " " + u;
   text(image, stats, {30.0, 64.0}, 0.6, kBlack);
   if (!options.subtitle.empty()) text(image, options.subtitle, {30.0, 88.0}, 0.48, kAxis);
 
@@ -312,7 +312,8 @@ cv::Mat renderAtePlot(const AteResult& ate, const PlotOptions& options, Alignmen
     if (ate.pairs[i].error_m > ate.pairs[worst].error_m) worst = i;
   }
   std::vector<double> times;
-  for (const auto& pair : ate.pairs) times.push_back(pair.timestamp_gt_s - ate.pairs.front().timestamp_gt_s);
+  for (const auto& pair : ate.pairs)
+    times.push_back(pair.timestamp_gt_s - ate.pairs.front().timestamp_gt_s);
   const double gap = gapThreshold(times);
   const double max_error = std::max(s.max, 1e-12);
   // Draw about 250 difference segments at most, so they stay readable.
@@ -326,17 +327,20 @@ cv::Mat renderAtePlot(const AteResult& ate, const PlotOptions& options, Alignmen
     panel.x = padded(lo(h_axis), hi(h_axis), 0.06);
     panel.y = padded(lo(v_axis), hi(v_axis), 0.06);
     equalizeAspect(panel);
-    drawAxes(image, panel, std::string(kAxisNames[h_axis]) + " [m]",
-             std::string(kAxisNames[v_axis]) + " [m]",
-             view == 0 ? std::string("Top view (") + kAxisNames[h_axis] + "-" + kAxisNames[v_axis] + ")"
-                       : std::string("Side view (") + kAxisNames[h_axis] + "-" + kAxisNames[v_axis] + ")");
+    drawAxes(
+        image, panel, std::string(kAxisNames[h_axis]) + " [m]",
+        std::string(kAxisNames[v_axis]) + " [m]",
+        view == 0
+            ? std::string("Top view (") + kAxisNames[h_axis] + "-" + kAxisNames[v_axis] + ")"
+            : std::string("Side view (") + kAxisNames[h_axis] + "-" + kAxisNames[v_axis] + ")");
     const auto at = [&](const Eigen::Vector3d& p) { return panel.toPixel(p(h_axis), p(v_axis)); };
     for (std::size_t i = 0; i < ate.pairs.size(); i += every) {
       line(image, at(ate.pairs[i].position_gt_m), at(ate.pairs[i].position_est_m), kDifference, 1);
     }
     for (std::size_t i = 1; i < ate.pairs.size(); ++i) {
       if (times[i] - times[i - 1] > gap) continue;
-      line(image, at(ate.pairs[i - 1].position_gt_m), at(ate.pairs[i].position_gt_m), kGroundTruth, 2);
+      line(image, at(ate.pairs[i - 1].position_gt_m), at(ate.pairs[i].position_gt_m), kGroundTruth,
+           2);
     }
     for (std::size_t i = 1; i < ate.pairs.size(); ++i) {
       if (times[i] - times[i - 1] > gap) continue;
@@ -354,22 +358,25 @@ cv::Mat renderAtePlot(const AteResult& ate, const PlotOptions& options, Alignmen
   const double legend_y = top + spatial_height + 62.0;
   double lx = 100.0;
   line(image, {lx, legend_y}, {lx + 30, legend_y}, kGroundTruth, 2);
-  text(image, "ground truth (dot = start)", {lx + 38, legend_y}, kTickFontScale, kBlack, Anchor::kLeft, 1, true);
+  text(image, "ground truth (dot = start)", {lx + 38, legend_y}, kTickFontScale, kBlack,
+       Anchor::kLeft, 1, true);
   lx += 265;
   for (int i = 0; i < 30; ++i) {
     line(image, {lx + i, legend_y}, {lx + i + 1, legend_y}, errorColour(i / 29.0), 3);
   }
-  text(image, "estimate, aligned (colour = error)", {lx + 38, legend_y}, kTickFontScale, kBlack, Anchor::kLeft, 1, true);
+  text(image, "estimate, aligned (colour = error)", {lx + 38, legend_y}, kTickFontScale, kBlack,
+       Anchor::kLeft, 1, true);
   lx += 300;
   line(image, {lx, legend_y}, {lx + 30, legend_y}, kDifference, 1);
-  text(image, "associated poses", {lx + 38, legend_y}, kTickFontScale, kBlack, Anchor::kLeft, 1, true);
+  text(image, "associated poses", {lx + 38, legend_y}, kTickFontScale, kBlack, Anchor::kLeft, 1,
+       true);
   lx += 190;
   cv::circle(image, px({lx + 15, legend_y}), 8 * 16, kWorst, 2, cv::LINE_AA, 4);
   text(image, "largest error", {lx + 38, legend_y}, kTickFontScale, kBlack, Anchor::kLeft, 1, true);
 
-  drawColourBar(image,
-                cv::Rect(100 + 2 * panel_width + 100 + 30, top + 20, bar_width, spatial_height - 40),
-                max_error * k, u);
+  drawColourBar(
+      image, cv::Rect(100 + 2 * panel_width + 100 + 30, top + 20, bar_width, spatial_height - 40),
+      max_error * k, u);
 
   // Error over time.
   Series series;
@@ -388,10 +395,9 @@ cv::Mat renderRpePlot(const RpeResult& rpe, const PlotOptions& options) {
   const ErrorUnit unit = errorUnitFor(rpe.translation_m.max);
   const std::string title = options.title.empty() ? "Relative pose error" : options.title;
   text(image, title, {30.0, 34.0}, 0.85, kBlack, Anchor::kLeft, 2);
-  const std::string stats =
-      std::to_string(rpe.translation_m.count) + " pairs   translation RMSE " +
-      fixed(rpe.translation_m.rmse * unit.per_metre, 2) + " " + unit.name + "   rotation RMSE " +
-      fixed(rpe.rotation_deg.rmse, 3) + " deg";
+  const std::string stats = std::to_string(rpe.translation_m.count) + " pairs   translation RMSE " +
+                            fixed(rpe.translation_m.rmse * unit.per_metre, 2) + " " + unit.name +
+                            "   rotation RMSE " + fixed(rpe.rotation_deg.rmse, 3) + " deg";
   text(image, stats, {30.0, 64.0}, 0.6, kBlack);
   if (!options.subtitle.empty()) text(image, options.subtitle, {30.0, 88.0}, 0.48, kAxis);
 

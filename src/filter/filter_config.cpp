@@ -94,19 +94,18 @@ const ConfigSchema<FilterConfig>& FilterConfig::schema() {
           .flag("surface_axes", &C::surface_axes,
                 "detect the dominant plane axes of the depth image (filter.axes.*) and use them "
                 "as updates of the same direction landmarks")
-          .number("translation_noise_m_per_sqrt_s", &C::translation_noise_m_per_sqrt_s, 0.0,
-                  10.0, "m/sqrt(s)",
+          .number("translation_noise_m_per_sqrt_s", &C::translation_noise_m_per_sqrt_s, 0.0, 10.0,
+                  "m/sqrt(s)",
                   "process noise added to each prediction on top of the odometry covariance")
           .number("rotation_noise_rad_per_sqrt_s", &C::rotation_noise_rad_per_sqrt_s, 0.0, 10.0,
                   "rad/sqrt(s)", "as above for the rotation (camera frame, right perturbation)")
           .number("odometry_covariance_scale", &C::odometry_covariance_scale, 0.01, 1e4, "",
                   "multiplies each odometry covariance")
-          .number("fallback_translation_sigma_m", &C::fallback_translation_sigma_m, 1e-6, 10.0,
-                  "m",
+          .number("fallback_translation_sigma_m", &C::fallback_translation_sigma_m, 1e-6, 10.0, "m",
                   "translation sigma of an odometry increment whose own covariance is NaN or not "
                   "positive semi-definite (counted)")
-          .number("fallback_rotation_sigma_rad", &C::fallback_rotation_sigma_rad, 1e-6, 3.0,
-                  "rad", "the same for the rotation")
+          .number("fallback_rotation_sigma_rad", &C::fallback_rotation_sigma_rad, 1e-6, 3.0, "rad",
+                  "the same for the rotation")
           .number("max_angular_rate_radps", &C::max_angular_rate_radps, 0.01, 100.0, "rad/s",
                   "how fast the camera can turn: an increment's rotation variance is capped at "
                   "(limit * dt)^2 per axis")
@@ -122,8 +121,8 @@ const ConfigSchema<FilterConfig>& FilterConfig::schema() {
           .number("landmark_init_angle_deg", &C::landmark_init_angle_deg, 0.01, 45.0, "deg",
                   "world directions closer than this are \"the same\" while a candidate is "
                   "confirmed")
-          .number("landmark_min_separation_deg", &C::landmark_min_separation_deg, 0.0, 90.0,
-                  "deg", "a candidate closer than this to an existing landmark is never created")
+          .number("landmark_min_separation_deg", &C::landmark_min_separation_deg, 0.0, 90.0, "deg",
+                  "a candidate closer than this to an existing landmark is never created")
           .number("landmark_probation", &C::landmark_probation, 0, 1000, "detections",
                   "a new landmark first only tests this many detections, then becomes active if "
                   "consistent, otherwise is retired; 0 = active at once")
@@ -133,8 +132,7 @@ const ConfigSchema<FilterConfig>& FilterConfig::schema() {
           .number("landmark_consistency_chi2", &C::landmark_consistency_chi2, 0.1, 1000.0, "",
                   "a landmark is consistent while the median NIS of its recent detections stays "
                   "at or below this")
-          .number("landmark_retry_calls", &C::landmark_retry_calls, 0, 1000000,
-                  "vanishing points",
+          .number("landmark_retry_calls", &C::landmark_retry_calls, 0, 1000000, "vanishing points",
                   "a retired landmark's direction cannot start a new landmark for this many "
                   "vanishing points")
           .number("reanchor_detections", &C::reanchor_detections, 0, 1000, "detections",

@@ -40,23 +40,34 @@ void symmetrize(Eigen::MatrixXd& P) { P = 0.5 * (P + P.transpose()).eval(); }
 
 const char* ekfPredictStatusName(EkfPredictStatus status) {
   switch (status) {
-    case EkfPredictStatus::kOk: return "OK";
-    case EkfPredictStatus::kFallbackCovariance: return "FALLBACK_COVARIANCE";
-    case EkfPredictStatus::kRejected: return "REJECTED";
+    case EkfPredictStatus::kOk:
+      return "OK";
+    case EkfPredictStatus::kFallbackCovariance:
+      return "FALLBACK_COVARIANCE";
+    case EkfPredictStatus::kRejected:
+      return "REJECTED";
   }
   return "UNKNOWN";
 }
 
 const char* vpUpdateStatusName(VpUpdateStatus status) {
   switch (status) {
-    case VpUpdateStatus::kAccepted: return "ACCEPTED";
-    case VpUpdateStatus::kGated: return "GATED";
-    case VpUpdateStatus::kNewLandmark: return "NEW_LANDMARK";
-    case VpUpdateStatus::kCandidate: return "CANDIDATE";
-    case VpUpdateStatus::kBadMeasurement: return "BAD_MEASUREMENT";
-    case VpUpdateStatus::kUnknownLandmark: return "UNKNOWN_LANDMARK";
-    case VpUpdateStatus::kNotVisible: return "NOT_VISIBLE";
-    case VpUpdateStatus::kProbation: return "PROBATION";
+    case VpUpdateStatus::kAccepted:
+      return "ACCEPTED";
+    case VpUpdateStatus::kGated:
+      return "GATED";
+    case VpUpdateStatus::kNewLandmark:
+      return "NEW_LANDMARK";
+    case VpUpdateStatus::kCandidate:
+      return "CANDIDATE";
+    case VpUpdateStatus::kBadMeasurement:
+      return "BAD_MEASUREMENT";
+    case VpUpdateStatus::kUnknownLandmark:
+      return "UNKNOWN_LANDMARK";
+    case VpUpdateStatus::kNotVisible:
+      return "NOT_VISIBLE";
+    case VpUpdateStatus::kProbation:
+      return "PROBATION";
   }
   return "UNKNOWN";
 }
@@ -277,8 +288,8 @@ bool PoseEkf::validMeasurement(const Eigen::Vector2d& pixel, const Eigen::Matrix
   return true;
 }
 
-bool PoseEkf::innovation(std::size_t index, const Observation& observation,
-                         VpUpdateResult* result, Eigen::MatrixXd* H) const {
+bool PoseEkf::innovation(std::size_t index, const Observation& observation, VpUpdateResult* result,
+                         Eigen::MatrixXd* H) const {
   const DirectionLandmark& landmark = landmarks_[index];
   Eigen::Vector2d predicted;
   Eigen::Matrix<double, 2, 3> H_rotation;
@@ -359,7 +370,8 @@ void PoseEkf::acceptUpdate(std::size_t index, const Eigen::MatrixXd& H,
                            const Observation& observation, VpUpdateResult* result) {
   applyUpdate(H, result->innovation_px, result->innovation_covariance, observation.R);
   ++landmarks_[index].num_updates;
-  if (observation.kind == DirectionMeasurement::kVanishingPoint) landmarks_[index].gated_run.clear();
+  if (observation.kind == DirectionMeasurement::kVanishingPoint)
+    landmarks_[index].gated_run.clear();
   ++counters_.updates_accepted;
   if (observation.kind == DirectionMeasurement::kSurfaceAxis) ++counters_.axis_updates_accepted;
   result->status = VpUpdateStatus::kAccepted;
@@ -511,9 +523,9 @@ Eigen::Vector3d PoseEkf::worldDirection(const Observation& observation,
 VpUpdateResult PoseEkf::updateObservation(const Observation& observation) {
   VpUpdateResult result;
   result.measurement = observation.kind;
-  result.measured_px =
-      observation.kind == DirectionMeasurement::kVanishingPoint ? observation.pixel
-                                                                : Eigen::Vector2d::Zero();
+  result.measured_px = observation.kind == DirectionMeasurement::kVanishingPoint
+                           ? observation.pixel
+                           : Eigen::Vector2d::Zero();
   result.status = VpUpdateStatus::kCandidate;
   const bool axis = observation.kind == DirectionMeasurement::kSurfaceAxis;
 
@@ -569,11 +581,10 @@ VpUpdateResult PoseEkf::updateObservation(const Observation& observation) {
   }
   if (nearRetired(d_world)) return result;
   // Candidates must be seen on consecutive ticks of their own clock.
-  candidates_.erase(std::remove_if(candidates_.begin(), candidates_.end(),
-                                   [&](const Candidate& c) {
-                                     return c.last_tick < clock(c.kind) - 1;
-                                   }),
-                    candidates_.end());
+  candidates_.erase(
+      std::remove_if(candidates_.begin(), candidates_.end(),
+                     [&](const Candidate& c) { return c.last_tick < clock(c.kind) - 1; }),
+      candidates_.end());
   const double same_cos = std::cos(config_.landmark_init_angle_deg * kDegToRad);
   const std::int64_t now = clock(observation.kind);
   Candidate* match = nullptr;

@@ -60,11 +60,16 @@ SurfaceAxesConfig SurfaceAxesConfig::load(Config& config) {
 
 const char* surfaceAxesStatusName(SurfaceAxesStatus status) {
   switch (status) {
-    case SurfaceAxesStatus::kOk: return "ok";
-    case SurfaceAxesStatus::kEmptyImage: return "empty image";
-    case SurfaceAxesStatus::kWrongImageType: return "wrong image type";
-    case SurfaceAxesStatus::kWrongImageSize: return "wrong image size";
-    case SurfaceAxesStatus::kNoPlanes: return "no planes";
+    case SurfaceAxesStatus::kOk:
+      return "ok";
+    case SurfaceAxesStatus::kEmptyImage:
+      return "empty image";
+    case SurfaceAxesStatus::kWrongImageType:
+      return "wrong image type";
+    case SurfaceAxesStatus::kWrongImageSize:
+      return "wrong image size";
+    case SurfaceAxesStatus::kNoPlanes:
+      return "no planes";
   }
   return "unknown";
 }
@@ -141,8 +146,8 @@ void SurfaceAxisDetector::fitCells(const cv::Mat& depth_m) {
       const Eigen::Vector3d beta = ldlt.solve(rhs);
       const double beta_norm = beta.norm();
       if (!beta.allFinite() || !(beta_norm > 0.0)) continue;
-      const double residual_ss = std::max(0.0, sum_w2 - 2.0 * beta.dot(rhs) +
-                                                   beta.dot(normal_matrix * beta));
+      const double residual_ss =
+          std::max(0.0, sum_w2 - 2.0 * beta.dot(rhs) + beta.dot(normal_matrix * beta));
       const double residual_var = residual_ss / (n - 3) + kMinResidualVariance;
       // Planar: the residual RMS of 1/z relative to its mean (~ relative depth error) is small.
       const double mean_w = sum_w / n;
@@ -150,7 +155,8 @@ void SurfaceAxisDetector::fitCells(const cv::Mat& depth_m) {
       // Covariance of the unit normal n = beta / |beta|, in its tangent basis.
       const Eigen::Vector3d normal = beta / beta_norm;
       const Eigen::Matrix3d beta_cov = residual_var * ldlt.solve(Eigen::Matrix3d::Identity());
-      const Eigen::Matrix3d J = (Eigen::Matrix3d::Identity() - normal * normal.transpose()) / beta_norm;
+      const Eigen::Matrix3d J =
+          (Eigen::Matrix3d::Identity() - normal * normal.transpose()) / beta_norm;
       const Eigen::Matrix<double, 3, 2> B = PoseEkf::tangentBasis(normal);
       const Eigen::Matrix2d tangent_cov = B.transpose() * J * beta_cov * J.transpose() * B;
       const Eigen::Matrix2d information = tangent_cov.inverse();
@@ -225,7 +231,8 @@ bool SurfaceAxisDetector::findAxis(const std::vector<SurfaceAxis>& found, Surfac
     std::vector<std::pair<Eigen::Vector2d, Eigen::Matrix2d>> residuals;
     for (const std::size_t i : inliers) {
       const Cell& c = cells_[i];
-      const Eigen::Vector3d n = c.normal.dot(direction) < 0.0 ? Eigen::Vector3d(-c.normal) : c.normal;
+      const Eigen::Vector3d n =
+          c.normal.dot(direction) < 0.0 ? Eigen::Vector3d(-c.normal) : c.normal;
       const Eigen::Matrix2d M = PoseEkf::tangentBasis(c.normal).transpose() * B;
       const Eigen::Matrix2d information = M.transpose() * c.information * M;
       const Eigen::Vector2d t = B.transpose() * n;
@@ -260,8 +267,7 @@ bool SurfaceAxisDetector::findAxis(const std::vector<SurfaceAxis>& found, Surfac
   // than those claim (neighbouring cells share quantisation steps and edges).
   const double count = static_cast<double>(inliers.size());
   const double unit_variance = count > 1.0 ? chi2 / (2.0 * count - 2.0) : 1.0;
-  Eigen::Matrix2d covariance =
-      std::max(1.0, unit_variance) * total_information.inverse();
+  Eigen::Matrix2d covariance = std::max(1.0, unit_variance) * total_information.inverse();
   const double floor_rad = config_.min_sigma_deg * kDegToRad;
   covariance.diagonal().array() += floor_rad * floor_rad;
 

@@ -48,8 +48,8 @@ bool supports(const LineRow& row, const Eigen::Vector2d& u, double max_sine) {
 
 /// Hough segments join integer edge pixels, a pixel or two off the true line (at half resolution
 /// that is 2-4 full-resolution pixels at the vanishing point). Refit the segment's line by least
-/// squares (principal axis) to every edge pixel within one pixel of it, then move its endpoints onto
-/// the fitted line. Keeps the input when too few pixels are found.
+/// squares (principal axis) to every edge pixel within one pixel of it, then move its endpoints
+/// onto the fitted line. Keeps the input when too few pixels are found.
 void refineOnEdges(const cv::Mat& edges, const Eigen::Vector2d& p1, const Eigen::Vector2d& p2,
                    Eigen::Vector2d* q1, Eigen::Vector2d* q2) {
   const Eigen::Vector2d d = p2 - p1;
@@ -237,14 +237,22 @@ Eigen::Vector2d undistortPixel(const CameraIntrinsics& K, const Eigen::Vector2d&
 
 const char* vanishingPointStatusName(VanishingPointStatus status) {
   switch (status) {
-    case VanishingPointStatus::kOk: return "OK";
-    case VanishingPointStatus::kEmptyImage: return "EMPTY_IMAGE";
-    case VanishingPointStatus::kWrongImageType: return "WRONG_IMAGE_TYPE";
-    case VanishingPointStatus::kWrongImageSize: return "WRONG_IMAGE_SIZE";
-    case VanishingPointStatus::kTooFewLines: return "TOO_FEW_LINES";
-    case VanishingPointStatus::kNoConsensus: return "NO_CONSENSUS";
-    case VanishingPointStatus::kDegenerate: return "DEGENERATE";
-    case VanishingPointStatus::kOutsideImage: return "OUTSIDE_IMAGE";
+    case VanishingPointStatus::kOk:
+      return "OK";
+    case VanishingPointStatus::kEmptyImage:
+      return "EMPTY_IMAGE";
+    case VanishingPointStatus::kWrongImageType:
+      return "WRONG_IMAGE_TYPE";
+    case VanishingPointStatus::kWrongImageSize:
+      return "WRONG_IMAGE_SIZE";
+    case VanishingPointStatus::kTooFewLines:
+      return "TOO_FEW_LINES";
+    case VanishingPointStatus::kNoConsensus:
+      return "NO_CONSENSUS";
+    case VanishingPointStatus::kDegenerate:
+      return "DEGENERATE";
+    case VanishingPointStatus::kOutsideImage:
+      return "OUTSIDE_IMAGE";
   }
   return "UNKNOWN";
 }
@@ -331,10 +339,9 @@ void VanishingPointDetector::extractSegments(const cv::Mat& gray) {
     segments_.push_back(s);
   }
   if (static_cast<int>(segments_.size()) > config_.max_segments) {
-    std::nth_element(segments_.begin(), segments_.begin() + config_.max_segments, segments_.end(),
-                     [](const LineSegment& a, const LineSegment& b) {
-                       return a.length_px() > b.length_px();
-                     });
+    std::nth_element(
+        segments_.begin(), segments_.begin() + config_.max_segments, segments_.end(),
+        [](const LineSegment& a, const LineSegment& b) { return a.length_px() > b.length_px(); });
     segments_.resize(static_cast<std::size_t>(config_.max_segments));
   }
 }
@@ -378,7 +385,8 @@ VanishingPoint VanishingPointDetector::estimateFromSegments(
     return result;
   };
   const int n = static_cast<int>(rows.size());
-  if (n < std::max(2, config_.min_supporting_lines)) return fail(VanishingPointStatus::kTooFewLines);
+  if (n < std::max(2, config_.min_supporting_lines))
+    return fail(VanishingPointStatus::kTooFewLines);
 
   const double w = intrinsics_.width, h = intrinsics_.height;
   const double margin_x = config_.max_outside_fraction * w;
@@ -479,8 +487,8 @@ VanishingPoint VanishingPointDetector::estimateFromSegments(
   const int m = static_cast<int>(inliers.size());
   const double sigma_sq = m > 2 ? sum_sq / (m - 2) : 0.0;
   Eigen::Matrix2d covariance = sigma_sq * AtA.inverse();
-  covariance += config_.min_pixel_sigma_px * config_.min_pixel_sigma_px *
-                Eigen::Matrix2d::Identity();
+  covariance +=
+      config_.min_pixel_sigma_px * config_.min_pixel_sigma_px * Eigen::Matrix2d::Identity();
   if (!covariance.allFinite()) return fail(VanishingPointStatus::kDegenerate);
 
   result.status = VanishingPointStatus::kOk;

@@ -12,13 +12,12 @@ VanishingPointFilter::VanishingPointFilter(const FilterConfig& config,
 FilterOutput VanishingPointFilter::process(const FilterInput& input) {
   FilterOutput out;
   out.predict_status = ekf_.predict(input.T_prev_curr, input.covariance, input.dt_s);
-  if (config_.enabled && config_.vanishing_points &&
-      (input.detection || !input.gray.empty())) {
+  if (config_.enabled && config_.vanishing_points && (input.detection || !input.gray.empty())) {
     out.vanishing_point = input.detection ? *input.detection : detector_.detect(input.gray);
     if (out.vanishing_point->status == VanishingPointStatus::kOk &&
         out.vanishing_point->num_supporting_lines >= config_.min_update_lines) {
-      out.update =
-          ekf_.updateVanishingPoint(out.vanishing_point->pixel, out.vanishing_point->pixel_covariance);
+      out.update = ekf_.updateVanishingPoint(out.vanishing_point->pixel,
+                                             out.vanishing_point->pixel_covariance);
     }
   }
   if (config_.enabled && config_.surface_axes && !input.depth_m.empty()) {

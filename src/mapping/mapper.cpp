@@ -266,9 +266,8 @@ IntegrationResult Mapper::integrate(const RgbdFrame& frame, const SE3& T_world_c
   options.min_depth_m = config_.min_depth_m;
   options.max_depth_m = config_.max_depth_m;
   options.pixel_stride = config_.pixel_stride;
-  const DepthCloudStatus cloud_status = depthToCloud(frame.depth_m, frame.color_bgr,
-                                                     frame.intrinsics, options, cloud_,
-                                                     result.depth);
+  const DepthCloudStatus cloud_status =
+      depthToCloud(frame.depth_m, frame.color_bgr, frame.intrinsics, options, cloud_, result.depth);
   result.cloud_ms = msSince(t_cloud);
   if (cloud_status != DepthCloudStatus::kOk) {
     result.status = IntegrationStatus::kBadFrame;
@@ -295,9 +294,8 @@ IntegrationResult Mapper::integrate(const RgbdFrame& frame, const SE3& T_world_c
   return result;
 }
 
-IntegrationResult Mapper::integrateCloud(const PointCloud& cloud_camera,
-                                         const SE3& T_world_camera, Utime utime,
-                                         std::optional<std::int64_t> keyframe_id) {
+IntegrationResult Mapper::integrateCloud(const PointCloud& cloud_camera, const SE3& T_world_camera,
+                                         Utime utime, std::optional<std::int64_t> keyframe_id) {
   IntegrationResult result;
   if (rejectBadPose(T_world_camera, result)) return result;
   // Drop non-finite points here so that nothing below ever sees them.
@@ -309,7 +307,8 @@ IntegrationResult Mapper::integrateCloud(const PointCloud& cloud_camera,
       continue;
     }
     filtered_.points.push_back(cloud_camera.points[i]);
-    if (with_color && cloud_camera.hasColor()) filtered_.colors_bgr.push_back(cloud_camera.colors_bgr[i]);
+    if (with_color && cloud_camera.hasColor())
+      filtered_.colors_bgr.push_back(cloud_camera.colors_bgr[i]);
   }
   stats_.depth_nan += result.depth.nan;
   result.depth.valid = static_cast<std::int64_t>(filtered_.size());
@@ -432,8 +431,7 @@ void Mapper::insertIntoTree(Tree& tree, const octomap::point3d& origin,
       tree.computeDiscreteUpdate(s.octomap_cloud, origin, free_cells, occupied_cells,
                                  config_.max_range_m);
     } else {
-      tree.computeUpdate(s.octomap_cloud, origin, free_cells, occupied_cells,
-                         config_.max_range_m);
+      tree.computeUpdate(s.octomap_cloud, origin, free_cells, occupied_cells, config_.max_range_m);
     }
     s.free_keys.assign(free_cells.begin(), free_cells.end());
     s.occupied_keys.assign(occupied_cells.begin(), occupied_cells.end());
@@ -705,7 +703,8 @@ MapFileResult Mapper::exportKeyframeCloudPly(const std::string& path, double vox
   result.path = path;
   PointCloud merged;
   bool all_colored = true;
-  for (const auto& entry : keyframes_) all_colored = all_colored && entry.second.cloud_camera.hasColor();
+  for (const auto& entry : keyframes_)
+    all_colored = all_colored && entry.second.cloud_camera.hasColor();
   for (const auto& entry : keyframes_) {
     const KeyframeCloud& kf = entry.second;
     const Eigen::Matrix3f R = kf.T_world_camera.linear().cast<float>();
@@ -851,7 +850,8 @@ void Mapper::afterMapReplaced() {
   frames_since_prune_ = 0;
 }
 
-// --- re-integration --------------------------------------------------------------------------------
+// --- re-integration
+// --------------------------------------------------------------------------------
 
 RebuildResult Mapper::rebuild(const std::vector<std::pair<std::int64_t, SE3>>& keyframe_poses) {
   const auto start = Clock::now();
@@ -895,9 +895,9 @@ RebuildResult Mapper::rebuild(const std::vector<std::pair<std::int64_t, SE3>>& k
 void Mapper::forgetKeyframe(std::int64_t keyframe_id) {
   const auto it = keyframes_.find(keyframe_id);
   if (it == keyframes_.end()) return;
-  stats_.keyframe_cloud_bytes -= static_cast<std::int64_t>(
-      it->second.cloud_camera.points.size() * sizeof(Eigen::Vector3f) +
-      it->second.cloud_camera.colors_bgr.size() * sizeof(ColorBgr));
+  stats_.keyframe_cloud_bytes -=
+      static_cast<std::int64_t>(it->second.cloud_camera.points.size() * sizeof(Eigen::Vector3f) +
+                                it->second.cloud_camera.colors_bgr.size() * sizeof(ColorBgr));
   keyframes_.erase(it);
   stats_.keyframe_clouds = static_cast<std::int64_t>(keyframes_.size());
 }

@@ -17,13 +17,14 @@ const EnumNames<InsertionMethod> kInsertionMethodNames = {
     {InsertionMethod::kDenseMask, "dense",
      "rays cast with OcTree::computeRayKeys, voxels de-duplicated in a dense bit mask over the "
      "frame's key bounding box"},
-    {InsertionMethod::kOctomap, "octomap", "OcTree::insertPointCloud (KeySet hashing), the reference"},
+    {InsertionMethod::kOctomap, "octomap",
+     "OcTree::insertPointCloud (KeySet hashing), the reference"},
     {InsertionMethod::kOctomapDiscrete, "octomap_discrete",
      "OcTree::insertPointCloud with discretize = true"},
 };
 
 const EnumNames<UpAxis> kUpAxisNames = {
-    {UpAxis::kPlusX, "+x", ""}, {UpAxis::kMinusX, "-x", ""}, {UpAxis::kPlusY, "+y", ""},
+    {UpAxis::kPlusX, "+x", ""},  {UpAxis::kMinusX, "-x", ""}, {UpAxis::kPlusY, "+y", ""},
     {UpAxis::kMinusY, "-y", ""}, {UpAxis::kPlusZ, "+z", ""},  {UpAxis::kMinusZ, "-z", ""},
 };
 

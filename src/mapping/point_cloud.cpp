@@ -40,8 +40,8 @@ DepthCloudStatus depthToCloud(const cv::Mat& depth_m, const cv::Mat& color_bgr,
       !std::isfinite(options.max_depth_m) || options.min_depth_m > options.max_depth_m) {
     return DepthCloudStatus::kBadOptions;
   }
-  const bool with_color = !color_bgr.empty() && color_bgr.type() == CV_8UC3 &&
-                          color_bgr.size() == depth_m.size();
+  const bool with_color =
+      !color_bgr.empty() && color_bgr.type() == CV_8UC3 && color_bgr.size() == depth_m.size();
   stats.color_used = with_color;
 
   const int stride = options.pixel_stride;

@@ -60,8 +60,8 @@ void Pipeline::start() {
         // Linux applies setpriority(PRIO_PROCESS, tid) to one thread.
         const auto tid = static_cast<id_t>(syscall(SYS_gettid));
         if (setpriority(PRIO_PROCESS, tid, raw->nice()) != 0) {
-          SLAMD_LOG_WARN("pipeline") << "cannot set niceness " << raw->nice() << " of stage '"
-                                     << raw->name() << "'";
+          SLAMD_LOG_WARN("pipeline")
+              << "cannot set niceness " << raw->nice() << " of stage '" << raw->name() << "'";
         }
       }
       raw->run();

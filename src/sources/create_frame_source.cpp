@@ -1,8 +1,8 @@
 #include "slamd/sources/create_frame_source.hpp"
 
 #include "slamd/capture/paced_source.hpp"
-#include "slamd/common/log.hpp"
 #include "slamd/capture/tum_source.hpp"
+#include "slamd/common/log.hpp"
 #include "slamd/comms/lcm_frame_source.hpp"
 #ifdef SLAMD_HAVE_OPENNI2
 #include "slamd/capture/openni2_source.hpp"

@@ -17,8 +17,18 @@ constexpr double kRandomDurationS = 30.0;
 constexpr double kProfileStepM = 0.01;  ///< resolution of the speed profile along the path
 
 /// Signal indices (one seeded stream each).
-enum SignalIndex { kYawJitter, kPitchJitter, kRollJitter, kPosX, kPosY, kPosZ, kYaw, kPitch, kRoll,
-                   kSignalCount };
+enum SignalIndex {
+  kYawJitter,
+  kPitchJitter,
+  kRollJitter,
+  kPosX,
+  kPosY,
+  kPosZ,
+  kYaw,
+  kPitch,
+  kRoll,
+  kSignalCount
+};
 
 }  // namespace
 
@@ -135,7 +145,8 @@ CameraMotion::CameraMotion(const Scene& scene, MotionKind kind, const MotionPara
     turn = std::min(turn, 2.0 * M_PI - turn);
     previous_heading = heading;
     const double turn_per_m = turn / kProfileStepM;
-    const double local_speed = std::min(speed, params_.max_turn_rate_radps / std::max(turn_per_m, 1e-9));
+    const double local_speed =
+        std::min(speed, params_.max_turn_rate_radps / std::max(turn_per_m, 1e-9));
     time_at_arc_s_[static_cast<std::size_t>(i)] =
         time_at_arc_s_[static_cast<std::size_t>(i) - 1] + kProfileStepM / local_speed;
   }
@@ -162,8 +173,8 @@ Eigen::Vector2d CameraMotion::pathPoint(double s_m) const {
   double s = std::fmod(s_m, perimeter_m_);
   if (s < 0.0) s += perimeter_m_;
   const auto it = std::upper_bound(cumulative_m_.begin(), cumulative_m_.end(), s);
-  const std::size_t segment =
-      std::min<std::size_t>(static_cast<std::size_t>(it - cumulative_m_.begin()) - 1, path.size() - 1);
+  const std::size_t segment = std::min<std::size_t>(
+      static_cast<std::size_t>(it - cumulative_m_.begin()) - 1, path.size() - 1);
   const double length = cumulative_m_[segment + 1] - cumulative_m_[segment];
   const double fraction = length > 0.0 ? (s - cumulative_m_[segment]) / length : 0.0;
   const Eigen::Vector2d& a = path[segment];
@@ -237,11 +248,12 @@ SE3 CameraMotion::walkPose(double t_s, bool zigzag) const {
 
   // The walker half-turns the camera into the zigzag, with small hand tremor and gait rotations.
   const double deg = M_PI / 180.0;
-  const double yaw = heading + 0.6 * std::atan(lateral_slope) +
-                     2.0 * deg * signals_[kYawJitter].at(t_s);
-  const double pitch = -6.0 * deg + 1.5 * deg * signals_[kPitchJitter].at(t_s) +
-                       0.5 * deg * std::cos(step_phase);
-  const double roll = 1.5 * deg * signals_[kRollJitter].at(t_s) + 1.0 * deg * std::sin(0.5 * step_phase);
+  const double yaw =
+      heading + 0.6 * std::atan(lateral_slope) + 2.0 * deg * signals_[kYawJitter].at(t_s);
+  const double pitch =
+      -6.0 * deg + 1.5 * deg * signals_[kPitchJitter].at(t_s) + 0.5 * deg * std::cos(step_phase);
+  const double roll =
+      1.5 * deg * signals_[kRollJitter].at(t_s) + 1.0 * deg * std::sin(0.5 * step_phase);
   SE3 T_world_camera = SE3::Identity();
   T_world_camera.linear() = lookRotation(yaw, pitch, roll);
   T_world_camera.translation() = position;
@@ -276,10 +288,14 @@ SE3 CameraMotion::randomPose(double t_s) const {
 
 SE3 CameraMotion::poseAt(double t_s) const {
   switch (kind_) {
-    case MotionKind::kZigzag: return walkPose(t_s, true);
-    case MotionKind::kLoop: return walkPose(t_s, false);
-    case MotionKind::kRobot: return robotPose(t_s);
-    case MotionKind::kRandom: return randomPose(t_s);
+    case MotionKind::kZigzag:
+      return walkPose(t_s, true);
+    case MotionKind::kLoop:
+      return walkPose(t_s, false);
+    case MotionKind::kRobot:
+      return robotPose(t_s);
+    case MotionKind::kRandom:
+      return randomPose(t_s);
   }
   return SE3::Identity();
 }
@@ -288,14 +304,17 @@ int CameraMotion::naturalFrameCount() const {
   double duration_s = kRandomDurationS;
   switch (kind_) {
     case MotionKind::kZigzag: {
-      const auto leg = static_cast<std::size_t>(std::min(
-          scene_.navigation.first_leg_m / kProfileStepM, time_at_arc_s_.size() - 1.0));
+      const auto leg = static_cast<std::size_t>(
+          std::min(scene_.navigation.first_leg_m / kProfileStepM, time_at_arc_s_.size() - 1.0));
       duration_s = time_at_arc_s_[leg];
       break;
     }
     case MotionKind::kLoop:
-    case MotionKind::kRobot: duration_s = time_at_arc_s_.back(); break;
-    case MotionKind::kRandom: break;
+    case MotionKind::kRobot:
+      duration_s = time_at_arc_s_.back();
+      break;
+    case MotionKind::kRandom:
+      break;
   }
   // +1: the last frame lands exactly at the end (a loop's last pose equals its first).
   return static_cast<int>(std::floor(duration_s * params_.rate_hz)) + 1;
@@ -311,7 +330,8 @@ Trajectory sampleTrajectory(const CameraMotion& motion, int frames, Utime start_
   trajectory.reserve(static_cast<std::size_t>(std::max(0, frames)));
   for (int i = 0; i < frames; ++i) {
     const Utime utime = frameUtime(start_utime, i, rate_hz);
-    trajectory.push_back({utimeToSeconds(utime), motion.poseAt(utimeToSeconds(utime - start_utime))});
+    trajectory.push_back(
+        {utimeToSeconds(utime), motion.poseAt(utimeToSeconds(utime - start_utime))});
   }
   return trajectory;
 }

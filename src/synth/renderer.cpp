@@ -11,8 +11,8 @@ namespace {
 /// A rectangle in the camera frame, with what the per-pixel tests need.
 struct CameraRect {
   bool visible = false;
-  Eigen::Vector3d normal;  ///< unit normal, camera frame
-  double plane_k = 0.0;    ///< normal . origin (negative when front-facing)
+  Eigen::Vector3d normal;    ///< unit normal, camera frame
+  double plane_k = 0.0;      ///< normal . origin (negative when front-facing)
   Eigen::Vector3d u_scaled;  ///< edge_u / |edge_u|^2: a = (p - origin) . u_scaled
   Eigen::Vector3d v_scaled;
   double a_offset = 0.0;  ///< origin . u_scaled

@@ -48,8 +48,8 @@ class SceneBuilder {
     if (texel_m > 0.0) {
       rect.wrap_texture = true;
       rect.texels_per_m_u = rect.texels_per_m_v = 1.0 / texel_m;
-      rect.texel_offset = Eigen::Vector2d(std::floor(rng_.uniform(0.0, size)),
-                                          std::floor(rng_.uniform(0.0, size)));
+      rect.texel_offset =
+          Eigen::Vector2d(std::floor(rng_.uniform(0.0, size)), std::floor(rng_.uniform(0.0, size)));
     } else {
       rect.wrap_texture = false;
       rect.texels_per_m_u = size / width_m;
@@ -65,16 +65,16 @@ class SceneBuilder {
     const Eigen::Vector3d center = 0.5 * (min_m + max_m);
     const Eigen::Vector3d size = max_m - min_m;
     const Eigen::Vector3d z = Eigen::Vector3d::UnitZ();
-    facingRect({max_m.x(), center.y(), center.z()}, Eigen::Vector3d::UnitX(), z, size.y(),
-               size.z(), side_texture, texel_m);
+    facingRect({max_m.x(), center.y(), center.z()}, Eigen::Vector3d::UnitX(), z, size.y(), size.z(),
+               side_texture, texel_m);
     facingRect({min_m.x(), center.y(), center.z()}, -Eigen::Vector3d::UnitX(), z, size.y(),
                size.z(), side_texture, texel_m);
-    facingRect({center.x(), max_m.y(), center.z()}, Eigen::Vector3d::UnitY(), z, size.x(),
-               size.z(), side_texture, texel_m);
+    facingRect({center.x(), max_m.y(), center.z()}, Eigen::Vector3d::UnitY(), z, size.x(), size.z(),
+               side_texture, texel_m);
     facingRect({center.x(), min_m.y(), center.z()}, -Eigen::Vector3d::UnitY(), z, size.x(),
                size.z(), side_texture, texel_m);
-    facingRect({center.x(), center.y(), max_m.z()}, z, Eigen::Vector3d::UnitX(), size.y(),
-               size.x(), top_texture, texel_m);
+    facingRect({center.x(), center.y(), max_m.z()}, z, Eigen::Vector3d::UnitX(), size.y(), size.x(),
+               top_texture, texel_m);
     if (min_m.z() > 1e-6) {
       facingRect({center.x(), center.y(), min_m.z()}, -z, Eigen::Vector3d::UnitX(), size.y(),
                  size.x(), top_texture, texel_m);
@@ -120,16 +120,15 @@ class SceneBuilder {
         const Eigen::Vector2d h = a + direction * (along + 0.34) + normal_xy * 0.012;
         const Eigen::Vector2d h2 = h + direction * 0.12 + normal_xy * 0.05;
         box({std::min(h.x(), h2.x()), std::min(h.y(), h2.y()), 0.98},
-            {std::max(h.x(), h2.x()), std::max(h.y(), h2.y()), 1.01}, frame_texture,
-            frame_texture, 0.005, false);
+            {std::max(h.x(), h2.x()), std::max(h.y(), h2.y()), 1.01}, frame_texture, frame_texture,
+            0.005, false);
         along += 0.55 + rng_.uniform(0.8, 3.0);
       } else if (params_.posters && choice < 0.75) {
         const double width = rng_.uniform(0.45, 0.9);
         const double height = width * rng_.uniform(0.7, 1.45);
         along += 0.5 * width;
         const int texture = addTexture(TextureKind::kPoster, 1.0, 256);
-        onWall(a, b, normal_xy, along, rng_.uniform(1.35, 1.6), 0.008, width, height, texture,
-               0.0);
+        onWall(a, b, normal_xy, along, rng_.uniform(1.35, 1.6), 0.008, width, height, texture, 0.0);
         along += 0.5 * width + rng_.uniform(0.6, 3.0);
       } else {
         along += rng_.uniform(1.0, 3.0);
@@ -167,22 +166,21 @@ bool Scene::isFree(const Eigen::Vector3d& p_world, double margin_m) const {
 
 const ConfigSchema<SceneParams>& SceneParams::schema() {
   using C = SceneParams;
-  static const auto table =
-      ConfigSchema<C>("synthetic")
-          .number("texture_density", &C::texture_density, 0.0, 1.0, "",
-                  "0 = nearly featureless walls .. 1 = rich marks")
-          .flag("doors", &C::doors, "doors along corridor walls")
-          .flag("posters", &C::posters, "posters on walls")
-          .number("corridor_length_m", &C::corridor_length_m, 8.0, 200.0, "m",
-                  "length of the corridor scene")
-          .number("corridor_width_m", &C::corridor_width_m, 1.4, 6.0, "m",
-                  "width of the corridor scene")
-          .number("corridor_height_m", &C::corridor_height_m, 2.0, 5.0, "m",
-                  "height of the corridor scene")
-          .number("loop_length_m", &C::loop_length_m, 8.0, 100.0, "m",
-                  "outer x extent of the ring corridor")
-          .number("loop_width_m", &C::loop_width_m, 8.0, 100.0, "m",
-                  "outer y extent of the ring corridor");
+  static const auto table = ConfigSchema<C>("synthetic")
+                                .number("texture_density", &C::texture_density, 0.0, 1.0, "",
+                                        "0 = nearly featureless walls .. 1 = rich marks")
+                                .flag("doors", &C::doors, "doors along corridor walls")
+                                .flag("posters", &C::posters, "posters on walls")
+                                .number("corridor_length_m", &C::corridor_length_m, 8.0, 200.0, "m",
+                                        "length of the corridor scene")
+                                .number("corridor_width_m", &C::corridor_width_m, 1.4, 6.0, "m",
+                                        "width of the corridor scene")
+                                .number("corridor_height_m", &C::corridor_height_m, 2.0, 5.0, "m",
+                                        "height of the corridor scene")
+                                .number("loop_length_m", &C::loop_length_m, 8.0, 100.0, "m",
+                                        "outer x extent of the ring corridor")
+                                .number("loop_width_m", &C::loop_width_m, 8.0, 100.0, "m",
+                                        "outer y extent of the ring corridor");
   return table;
 }
 
@@ -211,8 +209,10 @@ Scene makeCorridor(const SceneParams& params, std::uint64_t seed) {
   const double half = 0.5 * params.corridor_width_m;
   const double height = params.corridor_height_m;
   const double density = params.texture_density;
-  const int left_texture = builder.addTexture(TextureKind::kPlaster, density, params.wall_texture_px);
-  const int right_texture = builder.addTexture(TextureKind::kPlaster, density, params.wall_texture_px);
+  const int left_texture =
+      builder.addTexture(TextureKind::kPlaster, density, params.wall_texture_px);
+  const int right_texture =
+      builder.addTexture(TextureKind::kPlaster, density, params.wall_texture_px);
   const int end_texture = builder.addTexture(TextureKind::kPlaster, std::max(density, 0.3), 512);
   const int floor_texture = builder.addTexture(TextureKind::kFloorTiles, density, 512);
   const int ceiling_texture = builder.addTexture(TextureKind::kCeilingTiles, density, 512);
@@ -221,7 +221,8 @@ Scene makeCorridor(const SceneParams& params, std::uint64_t seed) {
   const int skirting_texture = builder.addTexture(TextureKind::kWood, 0.0, 256);
   const Eigen::Vector3d z = Eigen::Vector3d::UnitZ();
   const Eigen::Vector3d x = Eigen::Vector3d::UnitX();
-  builder.facingRect({0.5 * length, 0.0, 0.0}, z, x, 2.0 * half, length, floor_texture, kWallTexelM);
+  builder.facingRect({0.5 * length, 0.0, 0.0}, z, x, 2.0 * half, length, floor_texture,
+                     kWallTexelM);
   builder.facingRect({0.5 * length, 0.0, height}, -z, x, 2.0 * half, length, ceiling_texture,
                      kWallTexelM);
   builder.wall(v2(0, half), v2(length, half), v2(0, -1), height, left_texture);
@@ -233,15 +234,17 @@ Scene makeCorridor(const SceneParams& params, std::uint64_t seed) {
   builder.decorateCorridorWall(v2(0, -half), v2(length, -half), v2(0, 1), door_texture,
                                frame_texture, skirting_texture);
   Scene& scene = builder.scene();
-  scene.bounds = Eigen::AlignedBox3d(Eigen::Vector3d(0, -half, 0), Eigen::Vector3d(length, half, height));
+  scene.bounds =
+      Eigen::AlignedBox3d(Eigen::Vector3d(0, -half, 0), Eigen::Vector3d(length, half, height));
   const double lane = std::min(0.2, 0.25 * half);
   const double end = std::min(1.5, 0.2 * length);
   scene.navigation.patrol_path_xy = {v2(end, -lane), v2(length - end, -lane),
                                      v2(length - end, lane), v2(end, lane)};
   scene.navigation.first_leg_m = length - 2.0 * end;
   scene.navigation.lateral_clearance_m = std::max(0.1, half - lane - 0.45);
-  scene.navigation.random_region = Eigen::AlignedBox3d(
-      Eigen::Vector3d(2.0, -0.4 * half, 1.0), Eigen::Vector3d(std::min(9.0, 0.4 * length), 0.4 * half, 1.8));
+  scene.navigation.random_region =
+      Eigen::AlignedBox3d(Eigen::Vector3d(2.0, -0.4 * half, 1.0),
+                          Eigen::Vector3d(std::min(9.0, 0.4 * length), 0.4 * half, 1.8));
   scene.navigation.random_yaw_center_rad = 0.0;
   scene.navigation.random_yaw_range_rad = 0.6;
   return builder.take();
@@ -256,7 +259,8 @@ Scene makeCorridorLoop(const SceneParams& params, std::uint64_t seed) {
   const double density = params.texture_density;
   std::vector<int> wall_textures;
   for (int i = 0; i < 8; ++i) {
-    wall_textures.push_back(builder.addTexture(TextureKind::kPlaster, density, params.wall_texture_px / 2));
+    wall_textures.push_back(
+        builder.addTexture(TextureKind::kPlaster, density, params.wall_texture_px / 2));
   }
   const int floor_texture = builder.addTexture(TextureKind::kFloorTiles, density, 512);
   const int ceiling_texture = builder.addTexture(TextureKind::kCeilingTiles, density, 512);
@@ -311,7 +315,8 @@ Scene makeRoom(const SceneParams& params, std::uint64_t seed) {
   const double height = 2.7;
   const double density = params.texture_density;
   const int wall_texture = builder.addTexture(TextureKind::kPlaster, density, 512);
-  const int accent_texture = builder.addTexture(TextureKind::kPlaster, std::min(1.0, density + 0.2), 512);
+  const int accent_texture =
+      builder.addTexture(TextureKind::kPlaster, std::min(1.0, density + 0.2), 512);
   const int floor_texture = builder.addTexture(TextureKind::kFloorTiles, density, 512);
   const int ceiling_texture = builder.addTexture(TextureKind::kCeilingTiles, density, 512);
   const int wood = builder.addTexture(TextureKind::kWood, density, 256);
@@ -332,7 +337,8 @@ Scene makeRoom(const SceneParams& params, std::uint64_t seed) {
   // Door (x = wx wall), window (x = 0 wall), whiteboard (y = 0 wall), posters.
   const int door_texture = builder.addTexture(TextureKind::kWoodDoor, density, 512);
   builder.onWall(v2(wx, 0), v2(wx, wy), v2(-1, 0), 3.9, 1.05, 0.004, 1.04, 2.1, metal, 0.01);
-  builder.onWall(v2(wx, 0), v2(wx, wy), v2(-1, 0), 3.9, 1.025, 0.012, 0.9, 2.05, door_texture, 0.005);
+  builder.onWall(v2(wx, 0), v2(wx, wy), v2(-1, 0), 3.9, 1.025, 0.012, 0.9, 2.05, door_texture,
+                 0.005);
   const int window_texture = builder.addTexture(TextureKind::kPoster, 1.0, 256);
   builder.onWall(v2(0, wy), v2(0, 0), v2(1, 0), 1.2, 1.5, 0.01, 1.4, 1.1, window_texture, 0.0);
   const int board_texture = builder.addTexture(TextureKind::kPoster, 1.0, 512);
@@ -366,16 +372,18 @@ Scene makeRoom(const SceneParams& params, std::uint64_t seed) {
   // Bookshelf on the x = 0 wall with rows of books.
   builder.box(V3(0.0, 2.6, 0.0), V3(0.35, 4.0, 2.0), dark_wood, dark_wood, 0.01);
   std::vector<int> book_textures;
-  for (int i = 0; i < 6; ++i) book_textures.push_back(builder.addTexture(TextureKind::kFabric, 1.0, 64));
+  for (int i = 0; i < 6; ++i)
+    book_textures.push_back(builder.addTexture(TextureKind::kFabric, 1.0, 64));
   for (double shelf_z : {0.1, 0.6, 1.1, 1.55}) {
     double y = 2.65;
     while (y < 3.9) {
       const double thickness = builder.rng().uniform(0.025, 0.07);
       const double book_height = builder.rng().uniform(0.2, 0.36);
       const int texture = book_textures[static_cast<std::size_t>(builder.rng().uniformInt(0, 5))];
-      builder.box(V3(0.35, y, shelf_z), V3(0.35 + builder.rng().uniform(0.03, 0.08), y + thickness,
-                                           shelf_z + book_height),
-                  texture, texture, 0.004, false);
+      builder.box(
+          V3(0.35, y, shelf_z),
+          V3(0.35 + builder.rng().uniform(0.03, 0.08), y + thickness, shelf_z + book_height),
+          texture, texture, 0.004, false);
       y += thickness + builder.rng().uniform(0.0, 0.03);
     }
   }

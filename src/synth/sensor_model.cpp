@@ -116,8 +116,8 @@ cv::Mat SensorModel::measureDepth(const RenderOutput& render, std::uint64_t seed
   if (band > 0) {
     cv::Mat finite = exact.clone();
     cv::patchNaNs(finite, std::numeric_limits<float>::max());
-    cv::erode(finite, nearest, cv::getStructuringElement(cv::MORPH_RECT,
-                                                         cv::Size(2 * band + 1, 2 * band + 1)),
+    cv::erode(finite, nearest,
+              cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * band + 1, 2 * band + 1)),
               cv::Point(-1, -1), 1, cv::BORDER_REPLICATE);
   }
   Rng rng(deriveSeed(seed, kDepthNoise, static_cast<std::uint64_t>(frame)));
@@ -153,13 +153,13 @@ cv::Mat SensorModel::measureDepth(const RenderOutput& render, std::uint64_t seed
         const double n = static_cast<double>(normal_table[bits & 0xFFFF]);
         bits >>= 16;
         --bits_left;
-        const double incidence = static_cast<double>(
-            std::acos(std::clamp(cos_row[c], 0.0f, 1.0f)));
+        const double incidence = static_cast<double>(std::acos(std::clamp(cos_row[c], 0.0f, 1.0f)));
         measured += axialNoiseStdM(z, incidence) * n;
       }
       if (params_.depth_quantization) {
         // Positive disparities only: +0.5 then truncation is round-half-up.
-        const double steps = static_cast<double>(static_cast<std::int64_t>(fb8 / std::max(measured, 1e-3) + 0.5));
+        const double steps =
+            static_cast<double>(static_cast<std::int64_t>(fb8 / std::max(measured, 1e-3) + 0.5));
         measured = steps >= 1.0 ? fb8 / steps : std::numeric_limits<double>::infinity();
       }
       if ((params_.min_range_m > 0.0 && measured < params_.min_range_m) ||

@@ -59,7 +59,8 @@ SyntheticConfig SyntheticConfig::load(Config& config) {
 SyntheticSource::SyntheticSource(const std::string& scene_name, const SyntheticConfig& config)
     : scene_name_(scene_name), config_(config), sensor_(config.sensor) {
   try {
-    scene_ = std::make_unique<synth::Scene>(synth::makeScene(scene_name, config_.scene, config_.seed));
+    scene_ =
+        std::make_unique<synth::Scene>(synth::makeScene(scene_name, config_.scene, config_.seed));
   } catch (const std::invalid_argument& error) {
     throw SourceError(std::string("synthetic source: ") + error.what());
   }
@@ -70,7 +71,8 @@ SyntheticSource::SyntheticSource(const std::string& scene_name, const SyntheticC
   motion_ = std::make_unique<synth::CameraMotion>(*scene_, kind, config_.motion, config_.seed);
   frame_count_ = config_.frames > 0 ? config_.frames : motion_->naturalFrameCount();
   start_utime_ = secondsToUtime(config_.start_time_s);
-  ground_truth_ = synth::sampleTrajectory(*motion_, frame_count_, start_utime_, config_.motion.rate_hz);
+  ground_truth_ =
+      synth::sampleTrajectory(*motion_, frame_count_, start_utime_, config_.motion.rate_hz);
 }
 
 void SyntheticSource::open() {

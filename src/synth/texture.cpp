@@ -58,8 +58,7 @@ cv::Mat periodicNoise(Rng& rng, int size, int cells_x, int cells_y) {
 }
 
 /// Fills the image with `base` modulated by noise of the given amplitude (grey levels).
-void fillWithNoise(cv::Mat& image, const cv::Scalar& base, const cv::Mat& noise,
-                   double amplitude) {
+void fillWithNoise(cv::Mat& image, const cv::Scalar& base, const cv::Mat& noise, double amplitude) {
   for (int y = 0; y < image.rows; ++y) {
     auto* out = image.ptr<cv::Vec3b>(y);
     const auto* n = noise.ptr<float>(y);
@@ -123,13 +122,14 @@ void drawWallMarks(cv::Mat& image, Rng& rng, int count, const cv::Scalar& base) 
 
 cv::Mat makePlaster(Rng& rng, int size, double density) {
   const double luma = rng.uniform(185.0, 230.0);
-  const cv::Scalar base = bgr(luma + rng.uniform(-12, 12), luma + rng.uniform(-8, 8),
-                              luma + rng.uniform(-12, 12));
+  const cv::Scalar base =
+      bgr(luma + rng.uniform(-12, 12), luma + rng.uniform(-8, 8), luma + rng.uniform(-12, 12));
   cv::Mat image(size, size, CV_8UC3);
   // Faint low-frequency shading only: at density 0 this is all there is (a nearly featureless
   // wall: gradients of a few grey levels over metres give FAST nothing to fire on).
   fillWithNoise(image, base, periodicNoise(rng, size, 8, 8), 4.0);
-  const int marks = static_cast<int>(std::lround(density * 260.0 * (size / 512.0) * (size / 512.0)));
+  const int marks =
+      static_cast<int>(std::lround(density * 260.0 * (size / 512.0) * (size / 512.0)));
   drawWallMarks(image, rng, marks, base);
   return image;
 }
@@ -137,8 +137,8 @@ cv::Mat makePlaster(Rng& rng, int size, double density) {
 cv::Mat makeTiles(Rng& rng, int size, double density, bool ceiling) {
   const int tile = std::max(8, size / 16);
   const double luma = ceiling ? rng.uniform(200.0, 230.0) : rng.uniform(90.0, 170.0);
-  const cv::Scalar base = bgr(luma + rng.uniform(-15, 15), luma + rng.uniform(-10, 10),
-                              luma + rng.uniform(-15, 15));
+  const cv::Scalar base =
+      bgr(luma + rng.uniform(-15, 15), luma + rng.uniform(-10, 10), luma + rng.uniform(-15, 15));
   cv::Mat image(size, size, CV_8UC3);
   fillWithNoise(image, base, periodicNoise(rng, size, 32, 32), ceiling ? 3.0 : 6.0);
   const int tiles = size / tile;
@@ -161,7 +161,8 @@ cv::Mat makeTiles(Rng& rng, int size, double density, bool ceiling) {
     cv::line(image, cv::Point(0, k * tile), cv::Point(size - 1, k * tile), grout, 1, cv::LINE_8);
   }
   // Speckle (terrazzo, dirt): scales with density.
-  const int speckles = static_cast<int>(std::lround(density * 600.0 * (size / 512.0) * (size / 512.0)));
+  const int speckles =
+      static_cast<int>(std::lround(density * 600.0 * (size / 512.0) * (size / 512.0)));
   for (int i = 0; i < speckles; ++i) {
     const cv::Point p(rng.uniformInt(0, size - 1), rng.uniformInt(0, size - 1));
     const cv::Scalar color = contrastingColor(rng, base);
@@ -173,8 +174,9 @@ cv::Mat makeTiles(Rng& rng, int size, double density, bool ceiling) {
 }
 
 cv::Mat makeWood(Rng& rng, int size, double density, bool door) {
-  const cv::Scalar base = door ? bgr(rng.uniform(40, 70), rng.uniform(80, 110), rng.uniform(130, 170))
-                               : bgr(rng.uniform(60, 110), rng.uniform(110, 150), rng.uniform(150, 200));
+  const cv::Scalar base =
+      door ? bgr(rng.uniform(40, 70), rng.uniform(80, 110), rng.uniform(130, 170))
+           : bgr(rng.uniform(60, 110), rng.uniform(110, 150), rng.uniform(150, 200));
   cv::Mat image(size, size, CV_8UC3);
   cv::Mat grain = periodicNoise(rng, size, 64, 4);
   const cv::Mat coarse = periodicNoise(rng, size, 8, 8);
@@ -200,8 +202,10 @@ cv::Mat makeMetal(Rng& rng, int size, double density) {
   const int panels = 4;
   const int step = size / panels;
   for (int k = 0; k < panels; ++k) {
-    cv::line(image, cv::Point(0, k * step), cv::Point(size - 1, k * step), base * 0.4, 2, cv::LINE_8);
-    cv::line(image, cv::Point(k * step, 0), cv::Point(k * step, size - 1), base * 0.4, 2, cv::LINE_8);
+    cv::line(image, cv::Point(0, k * step), cv::Point(size - 1, k * step), base * 0.4, 2,
+             cv::LINE_8);
+    cv::line(image, cv::Point(k * step, 0), cv::Point(k * step, size - 1), base * 0.4, 2,
+             cv::LINE_8);
   }
   // Labels, screws and handles.
   drawWallMarks(image, rng, 8 + static_cast<int>(std::lround(density * 60.0)), base);
@@ -222,7 +226,8 @@ cv::Mat makePoster(Rng& rng, int size) {
   const cv::Scalar background = bgr(rng.uniform(0, 255), rng.uniform(0, 255), rng.uniform(0, 255));
   cv::Mat image(size, size, CV_8UC3, background);
   const auto random_color = [&] {
-    return bgr(rng.uniformInt(0, 1) * 200 + rng.uniform(0, 55), rng.uniformInt(0, 1) * 200 + rng.uniform(0, 55),
+    return bgr(rng.uniformInt(0, 1) * 200 + rng.uniform(0, 55),
+               rng.uniformInt(0, 1) * 200 + rng.uniform(0, 55),
                rng.uniformInt(0, 1) * 200 + rng.uniform(0, 55));
   };
   const double s = size / 256.0;
@@ -253,8 +258,8 @@ cv::Mat makePoster(Rng& rng, int size) {
     for (int cy = 0; cy < 5; ++cy) {
       for (int cx = 0; cx < 5; ++cx) {
         const cv::Point corner = origin + cv::Point(cx * cell, cy * cell);
-        cv::rectangle(image, corner, corner + cv::Point(cell - 1, cell - 1),
-                      (cx + cy) % 2 ? a : b, cv::FILLED, cv::LINE_8);
+        cv::rectangle(image, corner, corner + cv::Point(cell - 1, cell - 1), (cx + cy) % 2 ? a : b,
+                      cv::FILLED, cv::LINE_8);
       }
     }
   }
@@ -264,11 +269,13 @@ cv::Mat makePoster(Rng& rng, int size) {
   for (int r = 0; r < rows; ++r) {
     int x = static_cast<int>(12 * s);
     const int y = top + static_cast<int>(r * 12 * s);
-    cv::rectangle(image, cv::Point(x - 4, y - 2), cv::Point(size - x + 4, y + static_cast<int>(9 * s)),
-                  bgr(240, 240, 240), cv::FILLED, cv::LINE_8);
+    cv::rectangle(image, cv::Point(x - 4, y - 2),
+                  cv::Point(size - x + 4, y + static_cast<int>(9 * s)), bgr(240, 240, 240),
+                  cv::FILLED, cv::LINE_8);
     while (x < size - 20 * s) {
       const int word = static_cast<int>(rng.uniformInt(6, 28) * s);
-      cv::rectangle(image, cv::Point(x, y), cv::Point(std::min(x + word, size - 12), y + static_cast<int>(6 * s)),
+      cv::rectangle(image, cv::Point(x, y),
+                    cv::Point(std::min(x + word, size - 12), y + static_cast<int>(6 * s)),
                     bgr(20, 20, 20), cv::FILLED, cv::LINE_8);
       x += word + static_cast<int>(5 * s);
     }
@@ -292,14 +299,30 @@ Texture Texture::generate(TextureKind kind, double density, std::uint64_t seed, 
   Rng rng(seed);
   cv::Mat image;
   switch (kind) {
-    case TextureKind::kPlaster: image = makePlaster(rng, size_px, density); break;
-    case TextureKind::kFloorTiles: image = makeTiles(rng, size_px, density, false); break;
-    case TextureKind::kCeilingTiles: image = makeTiles(rng, size_px, density, true); break;
-    case TextureKind::kWoodDoor: image = makeWood(rng, size_px, density, true); break;
-    case TextureKind::kPoster: image = makePoster(rng, size_px); break;
-    case TextureKind::kWood: image = makeWood(rng, size_px, density, false); break;
-    case TextureKind::kMetal: image = makeMetal(rng, size_px, density); break;
-    case TextureKind::kFabric: image = makeFabric(rng, size_px, density); break;
+    case TextureKind::kPlaster:
+      image = makePlaster(rng, size_px, density);
+      break;
+    case TextureKind::kFloorTiles:
+      image = makeTiles(rng, size_px, density, false);
+      break;
+    case TextureKind::kCeilingTiles:
+      image = makeTiles(rng, size_px, density, true);
+      break;
+    case TextureKind::kWoodDoor:
+      image = makeWood(rng, size_px, density, true);
+      break;
+    case TextureKind::kPoster:
+      image = makePoster(rng, size_px);
+      break;
+    case TextureKind::kWood:
+      image = makeWood(rng, size_px, density, false);
+      break;
+    case TextureKind::kMetal:
+      image = makeMetal(rng, size_px, density);
+      break;
+    case TextureKind::kFabric:
+      image = makeFabric(rng, size_px, density);
+      break;
   }
   return fromImage(image);
 }

@@ -74,7 +74,8 @@ void TumSequenceWriter::write(const RgbdFrame& frame) {
   writePng(root / depth_name, depthMetersToRaw(frame.depth_m, depth_scale_));
   rgb_list_ << stamp << " " << rgb_name << "\n";
   depth_list_ << stamp << " " << depth_name << "\n";
-  if (!rgb_list_ || !depth_list_) throw std::runtime_error("cannot append to the lists in " + folder_);
+  if (!rgb_list_ || !depth_list_)
+    throw std::runtime_error("cannot append to the lists in " + folder_);
   ++frames_written_;
 }
 

@@ -52,8 +52,8 @@ void selectFeatures(const std::vector<cv::KeyPoint>& all, const cv::Mat& all_des
   }
 }
 
-std::vector<int> bucketIndices(const std::vector<cv::KeyPoint>& keypoints, cv::Size size,
-                               int cols, int rows, int max_total) {
+std::vector<int> bucketIndices(const std::vector<cv::KeyPoint>& keypoints, cv::Size size, int cols,
+                               int rows, int max_total) {
   const int cells = cols * rows;
   std::vector<int> order(keypoints.size());
   for (std::size_t i = 0; i < order.size(); ++i) order[i] = static_cast<int>(i);
@@ -68,12 +68,12 @@ std::vector<int> bucketIndices(const std::vector<cv::KeyPoint>& keypoints, cv::S
   keep.reserve(static_cast<std::size_t>(max_total));
   for (int i : order) {
     const cv::Point2f& p = keypoints[static_cast<std::size_t>(i)].pt;
-    const int cx = std::clamp(static_cast<int>(p.x * static_cast<float>(cols) /
-                                               static_cast<float>(size.width)),
-                              0, cols - 1);
-    const int cy = std::clamp(static_cast<int>(p.y * static_cast<float>(rows) /
-                                               static_cast<float>(size.height)),
-                              0, rows - 1);
+    const int cx = std::clamp(
+        static_cast<int>(p.x * static_cast<float>(cols) / static_cast<float>(size.width)), 0,
+        cols - 1);
+    const int cy = std::clamp(
+        static_cast<int>(p.y * static_cast<float>(rows) / static_cast<float>(size.height)), 0,
+        rows - 1);
     int& n = count[static_cast<std::size_t>(cy * cols + cx)];
     if (n < quota) {
       ++n;
@@ -192,8 +192,8 @@ class FovisExtractor : public FeatureExtractor {
     }
     features = FeatureSet();
     if (all.empty()) return;
-    const std::vector<int> keep = bucketIndices(all, gray.size(), config_.grid_cols,
-                                                config_.grid_rows, config_.max_features);
+    const std::vector<int> keep =
+        bucketIndices(all, gray.size(), config_.grid_cols, config_.grid_rows, config_.max_features);
     features.keypoints.reserve(keep.size());
     for (int i : keep) features.keypoints.push_back(all[static_cast<std::size_t>(i)]);
     // Descriptors at the detection position (before sub-pixel refinement).
@@ -249,8 +249,7 @@ std::unique_ptr<FeatureExtractor> makeFeatureExtractor(const TrackingConfig& con
 }
 
 std::vector<cv::KeyPoint> bucketKeypoints(const std::vector<cv::KeyPoint>& keypoints,
-                                          cv::Size image_size, int cols, int rows,
-                                          int max_total) {
+                                          cv::Size image_size, int cols, int rows, int max_total) {
   std::vector<cv::KeyPoint> out;
   for (int i : bucketIndices(keypoints, image_size, cols, rows, max_total)) {
     out.push_back(keypoints[static_cast<std::size_t>(i)]);
@@ -283,7 +282,7 @@ std::vector<Eigen::Vector2d> undistortPixels(const std::vector<cv::Point2f>& raw
 bool alignPatch(const cv::Mat& templ, const cv::Point2f& templ_px, const cv::Mat& image,
                 const cv::Point2f& initial_px, double max_shift_px, cv::Point2f& aligned_px,
                 const cv::Matx33d& ref_from_curr) {
-  constexpr int kHalf = 4;              // 9x9 patch
+  constexpr int kHalf = 4;  // 9x9 patch
   constexpr int kSide = 2 * kHalf + 1;
   constexpr int kBorder = kHalf + 2;
   constexpr double kMinCorrelation = 0.85;
@@ -372,7 +371,7 @@ bool alignPatch(const cv::Mat& templ, const cv::Point2f& templ_px, const cv::Mat
   double last_mean = 0.0;
   for (int it = 0; it < 10; ++it) {
     if (!inside(image, px, py)) return false;
-    double (&iv)[kSide][kSide] = last;
+    double(&iv)[kSide][kSide] = last;
     double& i_mean = last_mean;
     i_mean = 0.0;
     for (int y = 0; y < kSide; ++y) {
@@ -420,8 +419,8 @@ bool alignPatch(const cv::Mat& templ, const cv::Point2f& templ_px, const cv::Mat
   return true;
 }
 
-void attachGeometry(const cv::Mat& depth_m, const CameraIntrinsics& K,
-                    const TrackingConfig& config, FeatureSet& features) {
+void attachGeometry(const cv::Mat& depth_m, const CameraIntrinsics& K, const TrackingConfig& config,
+                    FeatureSet& features) {
   const std::size_t n = features.keypoints.size();
   features.pixels.resize(n);
   features.points.resize(n);
@@ -494,8 +493,8 @@ double depthAtPixel(const cv::Mat& depth_m, double x, double y, const TrackingCo
     if (z00 > 0.0 && z01 > 0.0 && z10 > 0.0 && z11 > 0.0 && std::isfinite(z00) &&
         std::isfinite(z01) && std::isfinite(z10) && std::isfinite(z11)) {
       const double ax = x - x0, ay = y - y0;
-      const double inverse_depth = (1 - ay) * ((1 - ax) / z00 + ax / z01) +
-                                   ay * ((1 - ax) / z10 + ax / z11);
+      const double inverse_depth =
+          (1 - ay) * ((1 - ax) / z00 + ax / z01) + ay * ((1 - ax) / z10 + ax / z11);
       z = 1.0 / inverse_depth;
     }
   }

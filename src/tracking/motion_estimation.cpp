@@ -115,8 +115,10 @@ RansacResult ransacRigid(const std::vector<Correspondence>& matches, const Camer
     // Cheap pre-check: a rigid motion keeps distances (within depth noise).
     for (int a = 0; a < 3 && ok; ++a) {
       for (int b = a + 1; b < 3; ++b) {
-        const double da = (sample_a[static_cast<std::size_t>(a)] - sample_a[static_cast<std::size_t>(b)]).norm();
-        const double db = (sample_b[static_cast<std::size_t>(a)] - sample_b[static_cast<std::size_t>(b)]).norm();
+        const double da =
+            (sample_a[static_cast<std::size_t>(a)] - sample_a[static_cast<std::size_t>(b)]).norm();
+        const double db =
+            (sample_b[static_cast<std::size_t>(a)] - sample_b[static_cast<std::size_t>(b)]).norm();
         if (da < 0.01 || std::abs(da - db) > 0.05 + 0.05 * da) {
           ok = false;
           break;
@@ -132,8 +134,8 @@ RansacResult ransacRigid(const std::vector<Correspondence>& matches, const Camer
       best_cost = cost;
       best = T;
       // Adaptive number of hypotheses for 99.9% confidence with the inlier ratio seen so far.
-      const double w = std::clamp(static_cast<double>(count) / static_cast<double>(matches.size()),
-                                  1e-3, 1.0);
+      const double w =
+          std::clamp(static_cast<double>(count) / static_cast<double>(matches.size()), 1e-3, 1.0);
       const double denom = std::log(std::max(1e-12, 1.0 - w * w * w));
       const double n_needed = denom < 0.0 ? std::log(1e-3) / denom : 1.0;
       needed = std::min(max_iterations, std::max(10, static_cast<int>(std::ceil(n_needed))));
@@ -236,9 +238,9 @@ std::vector<int> maximumConsistentClique(const std::vector<Correspondence>& matc
 namespace {
 
 /// refinementResidual() with the inverse transform T_curr_ref = T_ref_curr^-1 precomputed.
-int residualFromInverse(const Correspondence& c, const CameraIntrinsics& K,
-                        const SE3& T_curr_ref, double depth_sigma_coeff,
-                        Eigen::Vector3d& residual, Eigen::Matrix<double, 3, 6>& jacobian) {
+int residualFromInverse(const Correspondence& c, const CameraIntrinsics& K, const SE3& T_curr_ref,
+                        double depth_sigma_coeff, Eigen::Vector3d& residual,
+                        Eigen::Matrix<double, 3, 6>& jacobian) {
   // q = T^-1 * P; with T' = T * exp(xi): q' = exp(-xi) * q ~ q - rho + [q]x phi.
   const Eigen::Vector3d q = T_curr_ref * c.point_ref;
   if (q.z() <= 1e-6) return 0;
@@ -397,8 +399,7 @@ RefinementResult refinePose(const std::vector<Correspondence>& matches,
     if (next.cost <= current.cost) {
       T = T_new;
       // Converged when the step is far below the noise (0.1 um, 1e-7 rad) or the cost stalls.
-      const bool converged =
-          delta.norm() < 1e-7 || current.cost - next.cost < 1e-6 * current.cost;
+      const bool converged = delta.norm() < 1e-7 || current.cost - next.cost < 1e-6 * current.cost;
       current = next;
       lambda = std::max(1e-7, lambda * 0.1);
       if (converged) {
@@ -431,8 +432,8 @@ AlignedInliers alignInlierPatches(const FeatureSet& ref, const FeatureSet& curr,
                                   const std::vector<Correspondence>& matches,
                                   const std::vector<std::uint8_t>& inliers) {
   AlignedInliers aligned;
-  if (ref.align_gray.empty() || curr.align_gray.empty() ||
-      ref.keypoints.size() != ref.size() || curr.keypoints.size() != curr.size()) {
+  if (ref.align_gray.empty() || curr.align_gray.empty() || ref.keypoints.size() != ref.size() ||
+      curr.keypoints.size() != curr.size()) {
     return aligned;
   }
   const SE3 T_curr_ref = T_ref_curr.inverse();
@@ -460,10 +461,10 @@ AlignedInliers alignInlierPatches(const FeatureSet& ref, const FeatureSet& curr,
                                       : Eigen::Vector2d::Zero();
     const Eigen::Vector3d w(slope.x(), slope.y(),
                             1.0 / c.point_ref.z() - slope.dot(ref_px));  // 1/z = w . (u, v, 1)
-    const Eigen::Vector3d normal = K_matrix.transpose() * w;          // n^T X = 1
+    const Eigen::Vector3d normal = K_matrix.transpose() * w;             // n^T X = 1
     const Eigen::Matrix3d curr_from_ref =
-        K_matrix *
-        (T_curr_ref.linear() + T_curr_ref.translation() * normal.transpose()) * K_inverse;
+        K_matrix * (T_curr_ref.linear() + T_curr_ref.translation() * normal.transpose()) *
+        K_inverse;
     const Eigen::Vector3d p0 = curr_from_ref * Eigen::Vector3d(ref_px.x(), ref_px.y(), 1.0);
     if (!(p0.z() > 0.0)) continue;
     // In pixel offsets: from the current position p0 of the reference pixel to the reference.
@@ -480,8 +481,8 @@ AlignedInliers alignInlierPatches(const FeatureSet& ref, const FeatureSet& curr,
     }
     cv::Point2f out;
     if (alignPatch(ref.align_gray, ref.keypoints[static_cast<std::size_t>(c.ref_index)].pt,
-                   curr.align_gray, curr.keypoints[static_cast<std::size_t>(c.curr_index)].pt,
-                   3.0, out, ref_from_curr)) {
+                   curr.align_gray, curr.keypoints[static_cast<std::size_t>(c.curr_index)].pt, 3.0,
+                   out, ref_from_curr)) {
       aligned.match_indices.push_back(i);
       aligned.pixels_raw.push_back(out);
     }

@@ -87,9 +87,10 @@ const ConfigSchema<TrackingConfig>& TrackingConfig::schema() {
                 "weigh reprojection and depth residuals by their estimated noise (median "
                 "residual) instead of pixel_sigma_px and depth_sigma_coeff as they are")
           .number("huber_k", &C::huber_k, 0.1, 100, "sigmas", "Huber kernel width")
-          .number("joint_references", &C::joint_references, -1, 10, "keyframes",
-                  "refine the pose jointly against this many more recent keyframes (held fixed) "
-                  "after the keyframe; 0 = the keyframe alone; -1 = 2 for orb and sift, 0 for fovis")
+          .number(
+              "joint_references", &C::joint_references, -1, 10, "keyframes",
+              "refine the pose jointly against this many more recent keyframes (held fixed) "
+              "after the keyframe; 0 = the keyframe alone; -1 = 2 for orb and sift, 0 for fovis")
           .number("joint_max_matches", &C::joint_max_matches, 10, 10000, "",
                   "matches used per extra reference in the joint refinement")
           .number("fovis_levels", &C::fovis_levels, 1, 5, "", "FOVIS pyramid levels")

@@ -197,12 +197,13 @@ void VisualOdometry::matchGuided(const FeatureSet& ref, const SE3& T_ref_curr_pr
         for (int j : curr.grid[static_cast<std::size_t>(cy * curr.grid_cols + cx)]) {
           const std::size_t ju = static_cast<std::size_t>(j);
           if ((cf.pixels[ju] - uv).squaredNorm() > r * r) continue;
-          if (norm == DescriptorNorm::kHamming && std::abs(cf.keypoints[ju].octave - ref_octave) > 1) {
+          if (norm == DescriptorNorm::kHamming &&
+              std::abs(cf.keypoints[ju].octave - ref_octave) > 1) {
             continue;
           }
           if (norm == DescriptorNorm::kSad && cf.keypoints[ju].octave != ref_octave) continue;
-          const int d = descriptorDistance(ref.descriptors, static_cast<int>(i), cf.descriptors, j,
-                                           norm);
+          const int d =
+              descriptorDistance(ref.descriptors, static_cast<int>(i), cf.descriptors, j, norm);
           if (d < best) {
             second = best;
             best = d;
@@ -223,7 +224,8 @@ void VisualOdometry::matchGuided(const FeatureSet& ref, const SE3& T_ref_curr_pr
     c.point_ref = ref.points[i];
     c.pixel_curr = cf.pixels[static_cast<std::size_t>(best_j)];
     c.depth_curr_m = cf.points[static_cast<std::size_t>(best_j)].z();
-    c.pixel_sigma_px = config_.pixel_sigma_px * static_cast<double>(cf.scale[static_cast<std::size_t>(best_j)]);
+    c.pixel_sigma_px =
+        config_.pixel_sigma_px * static_cast<double>(cf.scale[static_cast<std::size_t>(best_j)]);
     c.ref_index = static_cast<int>(i);
     c.curr_index = best_j;
     if (own.second < 0) {
@@ -409,9 +411,9 @@ VisualOdometry::TrackAttempt VisualOdometry::track(const FeatureSet& ref,
 }
 
 void VisualOdometry::alignInlierPatches(const FeatureSet& ref, const SE3& T_ref_curr,
-                                       const CurrentFrame& curr,
-                                       std::vector<Correspondence>& matches,
-                                       const std::vector<std::uint8_t>& inliers) const {
+                                        const CurrentFrame& curr,
+                                        std::vector<Correspondence>& matches,
+                                        const std::vector<std::uint8_t>& inliers) const {
   const AlignedInliers aligned =
       slamd::alignInlierPatches(ref, *curr.features, curr.K, T_ref_curr, matches, inliers);
   const std::vector<Eigen::Vector2d> pixels = undistortPixels(aligned.pixels_raw, curr.K, config_);
@@ -421,8 +423,8 @@ void VisualOdometry::alignInlierPatches(const FeatureSet& ref, const SE3& T_ref_
     c.pixel_curr = pixels[k];
     c.pixel_sigma_px = config_.pixel_sigma_px;
     // The depth where the patch now lies, not where the keypoint was detected.
-    c.depth_curr_m = depthAtPixel(curr.depth_m, static_cast<double>(raw.x),
-                                  static_cast<double>(raw.y), config_);
+    c.depth_curr_m =
+        depthAtPixel(curr.depth_m, static_cast<double>(raw.x), static_cast<double>(raw.y), config_);
   }
 }
 
@@ -541,8 +543,7 @@ SE3 VisualOdometry::alignRotation(const cv::Mat& small_curr, const CameraIntrins
 }
 
 KeyframePtr VisualOdometry::makeKeyframe(const CurrentFrame& curr, const RgbdFrame& frame,
-                                         const RgbdFramePtr& frame_ptr,
-                                         const SE3& T_world_camera) {
+                                         const RgbdFramePtr& frame_ptr, const SE3& T_world_camera) {
   auto kf = std::make_shared<Keyframe>();
   kf->id = next_keyframe_id_++;
   kf->segment = segment_;
@@ -689,8 +690,8 @@ OdometryResult VisualOdometry::startSegment(OdometryResult res, const CurrentFra
   res.status = OdometryStatus::kOk;
   res.tracking_state = TrackingState::kOk;
   res.T_world_camera = T_world_curr;
-  res.covariance = Matrix6d::Identity() *
-                   (state_ == TrackingState::kNotInitialized ? 0.0 : kLostCovariance);
+  res.covariance =
+      Matrix6d::Identity() * (state_ == TrackingState::kNotInitialized ? 0.0 : kLostCovariance);
   res.covariance_ref_curr = res.covariance;
   res.ref_utime = frame.utime;
   res.reference_keyframe_id = keyframe_->id;

@@ -75,10 +75,11 @@ Fr1Run runFr1(const std::filesystem::path& folder, int blackout_start, int black
   const Trajectory truth = *source->groundTruth();
   run.odometry_ate_m = eval::computeAte(truth, trajectory.odometry()).translation_m.rmse;
   run.slam_ate_m = eval::computeAte(truth, trajectory.corrected(backend)).translation_m.rmse;
-  std::printf("fr1/xyz (blackout %d frames): %d keyframes, %d segments, %d local edges, %d "
-              "relocalisations in %d attempts; ATE odometry %.4f m, full SLAM %.4f m\n",
-              blackout_count, run.keyframes, run.segments, run.local_edges, run.relocalizations,
-              run.relocalization_attempts, run.odometry_ate_m, run.slam_ate_m);
+  std::printf(
+      "fr1/xyz (blackout %d frames): %d keyframes, %d segments, %d local edges, %d "
+      "relocalisations in %d attempts; ATE odometry %.4f m, full SLAM %.4f m\n",
+      blackout_count, run.keyframes, run.segments, run.local_edges, run.relocalizations,
+      run.relocalization_attempts, run.odometry_ate_m, run.slam_ate_m);
   return run;
 }
 

@@ -4,8 +4,6 @@
 
 #include "slamd/backend/loop_detector.hpp"
 
-#include "slamd/backend/backend.hpp"
-
 #include <cmath>
 #include <cstdio>
 #include <random>
@@ -14,6 +12,7 @@
 #include <gtest/gtest.h>
 #include <opencv2/imgproc.hpp>
 
+#include "slamd/backend/backend.hpp"
 #include "slamd/synth/synthetic_source.hpp"
 
 namespace slamd {
@@ -40,8 +39,8 @@ RenderedKeyframes renderKeyframes(const std::string& scene, int step, int max_ke
   SE3 T_world_odometry = SE3::Identity();
   SE3 T_world_prev_true = SE3::Identity();
   RenderedKeyframes out;
-  for (int index = 0; index < source.frameCount() &&
-                      static_cast<int>(out.keyframes.size()) < max_keyframes;
+  for (int index = 0;
+       index < source.frameCount() && static_cast<int>(out.keyframes.size()) < max_keyframes;
        index += step) {
     const RgbdFramePtr frame = source.renderFrame(index);
     auto keyframe = std::make_shared<Keyframe>();
@@ -76,8 +75,8 @@ std::shared_ptr<const Vocabulary> roomVocabulary() {
     std::vector<cv::Mat> descriptors;
     for (const KeyframePtr& kf : room.keyframes) descriptors.push_back(kf->features.descriptors);
     const BackendConfig config;
-    return std::make_shared<const Vocabulary>(Vocabulary::train(
-        descriptors, config.vocabulary_branching, config.vocabulary_depth, 42));
+    return std::make_shared<const Vocabulary>(
+        Vocabulary::train(descriptors, config.vocabulary_branching, config.vocabulary_depth, 42));
   }();
   return vocabulary;
 }
@@ -135,8 +134,7 @@ TEST(LoopDetector, FindsTheRevisitOnTheRingCorridor) {
   const RenderedKeyframes& world = ringKeyframes();
   const DetectionRun run = detectLoops(world);
   std::printf("corridor_loop: %d keyframes, %zu loops, detection %.1f ms mean, %.1f ms max\n",
-              run.keyframes, run.loops.size(), run.total_time_ms / run.keyframes,
-              run.max_time_ms);
+              run.keyframes, run.loops.size(), run.total_time_ms / run.keyframes, run.max_time_ms);
   ASSERT_FALSE(run.loops.empty());
   const int n = run.keyframes;
   bool revisit = false;
@@ -144,11 +142,12 @@ TEST(LoopDetector, FindsTheRevisitOnTheRingCorridor) {
     const SE3 T_true = world.truth[static_cast<std::size_t>(d.match_id)].inverse() *
                        world.truth[static_cast<std::size_t>(d.query_id)];
     const SE3 error = T_true.inverse() * d.T_match_query;
-    std::printf("  loop %ld -> %ld: score %.3f, %d/%d inliers, consistency %d, error %.3f m "
-                "%.2f deg\n",
-                static_cast<long>(d.query_id), static_cast<long>(d.match_id), d.score,
-                d.num_inliers, d.num_matches, d.consistency, error.translation().norm(),
-                rotationAngleRad(error.linear()) * 180.0 / M_PI);
+    std::printf(
+        "  loop %ld -> %ld: score %.3f, %d/%d inliers, consistency %d, error %.3f m "
+        "%.2f deg\n",
+        static_cast<long>(d.query_id), static_cast<long>(d.match_id), d.score, d.num_inliers,
+        d.num_matches, d.consistency, error.translation().norm(),
+        rotationAngleRad(error.linear()) * 180.0 / M_PI);
     // Every accepted loop is a true one: the measured relative pose matches the ground truth.
     EXPECT_LT(error.translation().norm(), 0.05);
     EXPECT_LT(rotationAngleRad(error.linear()) * 180.0 / M_PI, 1.0);
@@ -223,8 +222,10 @@ TEST(Backend, ClosingTheRingLoopPullsTheDriftedKeyframesBackAndRelocalises) {
   }
   before = std::sqrt(before / static_cast<double>(world.keyframes.size()));
   after = std::sqrt(after / static_cast<double>(world.keyframes.size()));
-  std::printf("ring keyframes: RMS position error %.3f m -> %.3f m, last keyframe %.3f m -> "
-              "%.3f m\n", before, after, end_before, end_after);
+  std::printf(
+      "ring keyframes: RMS position error %.3f m -> %.3f m, last keyframe %.3f m -> "
+      "%.3f m\n",
+      before, after, end_before, end_after);
   EXPECT_GE(backend.numLoops(), 1);
   EXPECT_GT(backend.numLocalEdges(), 0);
   // Every keyframe that brought an edge (local or loop) was followed by an optimisation.
@@ -282,8 +283,8 @@ SegmentRun runWithLostTracking(bool relocalization) {
   for (std::size_t k = 0; k < 50; ++k) backend.addKeyframe(world.keyframes[k]);
   for (std::size_t k = 44; k < 80; ++k) {
     // Ids keep increasing across segments, as tracking numbers them.
-    auto kf = std::make_shared<Keyframe>(
-        *inNewSegment(world.keyframes[k], 1, T_odometry_world, k == 44));
+    auto kf =
+        std::make_shared<Keyframe>(*inNewSegment(world.keyframes[k], 1, T_odometry_world, k == 44));
     kf->id = static_cast<std::int64_t>(50 + (k - 44));
     run.updates.push_back(backend.addKeyframe(kf));
     if (run.updates.back().relocalized) ++run.relocalizations;
@@ -300,8 +301,7 @@ SegmentRun runWithLostTracking(bool relocalization) {
 
 TEST(Backend, RelocalisationPutsANewTrackingSegmentBackIntoTheMap) {
   const SegmentRun run = runWithLostTracking(true);
-  std::printf("lost tracking: new segment RMS error %.3f m with relocalisation\n",
-              run.rms_after_m);
+  std::printf("lost tracking: new segment RMS error %.3f m with relocalisation\n", run.rms_after_m);
   // The featureless first keyframe tries and fails; the next one relocalises.
   ASSERT_GE(run.updates.size(), 2u);
   EXPECT_TRUE(run.updates[0].relocalization_attempted);

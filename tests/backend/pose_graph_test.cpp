@@ -166,10 +166,11 @@ TEST(PoseGraph, DriftedRingWithExactMeasurementsConvergesToGroundTruth) {
   const double before_m = rmsPositionErrorM(ring);
   const PoseGraphResult result = ring.graph.optimize(PoseGraphOptions());
   const double after_m = rmsPositionErrorM(ring);
-  std::printf("exact ring 150 poses: %s after %d iterations, cost %.3g -> %.3g, %.2f ms; "
-              "RMS position error %.3f m -> %.2e m\n",
-              optimizationStatusName(result.status), result.iterations, result.initial_cost,
-              result.final_cost, result.time_ms, before_m, after_m);
+  std::printf(
+      "exact ring 150 poses: %s after %d iterations, cost %.3g -> %.3g, %.2f ms; "
+      "RMS position error %.3f m -> %.2e m\n",
+      optimizationStatusName(result.status), result.iterations, result.initial_cost,
+      result.final_cost, result.time_ms, before_m, after_m);
   EXPECT_EQ(result.status, OptimizationStatus::kConverged);
   EXPECT_GT(before_m, 0.3);
   EXPECT_LT(after_m, 1e-6);
@@ -186,10 +187,11 @@ TEST(PoseGraph, NoisyRingWithLoopEdgesReachesTheNoiseFloor) {
   const PoseGraphResult result = ring.graph.optimize(PoseGraphOptions());
   const double after_m = rmsPositionErrorM(ring);
   const double end_after_m = positionErrorM(ring, 149);
-  std::printf("noisy ring 150 poses: %s after %d iterations, cost %.1f -> %.1f, %.2f ms; "
-              "RMS position error %.3f m -> %.3f m, last pose %.3f m -> %.3f m\n",
-              optimizationStatusName(result.status), result.iterations, result.initial_cost,
-              result.final_cost, result.time_ms, before_m, after_m, end_before_m, end_after_m);
+  std::printf(
+      "noisy ring 150 poses: %s after %d iterations, cost %.1f -> %.1f, %.2f ms; "
+      "RMS position error %.3f m -> %.3f m, last pose %.3f m -> %.3f m\n",
+      optimizationStatusName(result.status), result.iterations, result.initial_cost,
+      result.final_cost, result.time_ms, before_m, after_m, end_before_m, end_after_m);
   EXPECT_EQ(result.status, OptimizationStatus::kConverged);
   // At the optimum the cost is about the redundancy: 6 * (edges - free nodes) = 24 (chi-square).
   EXPECT_LT(result.final_cost, 60.0);
@@ -211,15 +213,16 @@ TEST_P(WrongLoopEdge, IsDownWeightedAndTheSolutionStaysNearTheCleanOne) {
   std::mt19937 rng_same(42);
   RingGraph ring = makeRing(150, rng_same);
   // Nodes 40 and 110 lie across the ring (about 9 m apart); claim they coincide.
-  ASSERT_TRUE(ring.graph.addEdge({40, 110, SE3::Identity(),
-                                  informationOf(kLoopSigmaM, kLoopSigmaRad), EdgeKind::kLoop}));
+  ASSERT_TRUE(ring.graph.addEdge(
+      {40, 110, SE3::Identity(), informationOf(kLoopSigmaM, kLoopSigmaRad), EdgeKind::kLoop}));
   const PoseGraphResult result = ring.graph.optimize(options);
   const double shift_m = rmsDifferenceM(ring.graph, clean.graph);
   const double wrong_weight = result.edge_weights.back();
-  std::printf("%s: wrong loop weight %.2e, RMS shift from the clean solution %.3f m, RMS error "
-              "%.3f m, %d iterations\n",
-              robustKernelName(GetParam()), wrong_weight, shift_m, rmsPositionErrorM(ring),
-              result.iterations);
+  std::printf(
+      "%s: wrong loop weight %.2e, RMS shift from the clean solution %.3f m, RMS error "
+      "%.3f m, %d iterations\n",
+      robustKernelName(GetParam()), wrong_weight, shift_m, rmsPositionErrorM(ring),
+      result.iterations);
   EXPECT_LT(wrong_weight, 0.01);
   // Huber bounds the wrong edge's pull (without a kernel it moves the poses by more than 3 m,
   // see below); Cauchy removes it.
@@ -232,7 +235,9 @@ TEST_P(WrongLoopEdge, IsDownWeightedAndTheSolutionStaysNearTheCleanOne) {
 
 INSTANTIATE_TEST_SUITE_P(Kernels, WrongLoopEdge,
                          ::testing::Values(RobustKernel::kHuber, RobustKernel::kCauchy),
-                         [](const auto& param_info) { return std::string(robustKernelName(param_info.param)); });
+                         [](const auto& param_info) {
+                           return std::string(robustKernelName(param_info.param));
+                         });
 
 TEST(PoseGraph, WithoutARobustKernelAWrongLoopEdgeDistortsTheSolution) {
   PoseGraphOptions options;
@@ -243,8 +248,8 @@ TEST(PoseGraph, WithoutARobustKernelAWrongLoopEdgeDistortsTheSolution) {
   clean.graph.optimize(options);
   std::mt19937 rng_same(42);
   RingGraph ring = makeRing(150, rng_same);
-  ring.graph.addEdge({40, 110, SE3::Identity(), informationOf(kLoopSigmaM, kLoopSigmaRad),
-                      EdgeKind::kLoop});
+  ring.graph.addEdge(
+      {40, 110, SE3::Identity(), informationOf(kLoopSigmaM, kLoopSigmaRad), EdgeKind::kLoop});
   ring.graph.optimize(options);
   const double shift_m = rmsDifferenceM(ring.graph, clean.graph);
   std::printf("none: RMS shift from the clean solution %.3f m\n", shift_m);

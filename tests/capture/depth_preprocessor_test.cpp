@@ -1,10 +1,10 @@
 #include "slamd/capture/depth_preprocessor.hpp"
 
-#include <gtest/gtest.h>
-
 #include <cmath>
 #include <limits>
 #include <random>
+
+#include <gtest/gtest.h>
 
 namespace slamd {
 namespace {

@@ -1,10 +1,10 @@
 #include "slamd/comms/lcm_frame_source.hpp"
 
-#include <gtest/gtest.h>
-
 #include <chrono>
 #include <cmath>
 #include <thread>
+
+#include <gtest/gtest.h>
 #include <lcm/lcm-cpp.hpp>
 
 #include "slamd/comms/lcm_frame_publisher.hpp"

@@ -3,13 +3,14 @@
 // second slamd-play receives live; then lcm-logplayer replays the log into a third slamd-play.
 // All three list every frame (sequence, utime, depth and colour sums): the lists must be equal.
 
-#include <gtest/gtest.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <cstdlib>
 #include <fstream>
 #include <sstream>
+
+#include <gtest/gtest.h>
 
 #include "scoped_temp_dir.hpp"
 #include "test_data.hpp"

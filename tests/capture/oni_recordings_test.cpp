@@ -2,8 +2,6 @@
 // living room and at a desk, a PrimeSense sensor looking at chairs), read through Debian's
 // OpenNI2 OniFile driver. Skipped with a message when the data folder is absent.
 
-#include <gtest/gtest.h>
-
 #include <chrono>
 #include <cmath>
 #include <iostream>
@@ -11,6 +9,7 @@
 #include <thread>
 #include <vector>
 
+#include <gtest/gtest.h>
 #include <opencv2/imgproc.hpp>
 
 #include "slamd/capture/openni2_source.hpp"
@@ -181,9 +180,8 @@ TEST_P(OniRecording, PacedRealTimeDeliversOrCountsEveryFrame) {
   // manual playback. Whatever the timing, each frame is delivered once or counted as dropped.
   PacingConfig pacing;
   pacing.mode = PacingMode::kRealTime;
-  PacedSource source(std::make_unique<OpenNi2Source>(OpenNi2Source::Kind::kFile, path_,
-                                                     config(false)),
-                     pacing);
+  PacedSource source(
+      std::make_unique<OpenNi2Source>(OpenNi2Source::Kind::kFile, path_, config(false)), pacing);
   source.open();
   EXPECT_TRUE(source.isLive());
   const auto frames = playAll(source);
@@ -230,8 +228,10 @@ class EdgeAlignment {
     int inside = 0;
     int on_edge = 0;
     for (const cv::Point2f& p : depth_edges_) {
-      const auto u = static_cast<int>(std::lround(cu + scale * (static_cast<double>(p.x) - cu) + dx));
-      const auto v = static_cast<int>(std::lround(cv_ + scale * (static_cast<double>(p.y) - cv_) + dy));
+      const auto u =
+          static_cast<int>(std::lround(cu + scale * (static_cast<double>(p.x) - cu) + dx));
+      const auto v =
+          static_cast<int>(std::lround(cv_ + scale * (static_cast<double>(p.y) - cv_) + dy));
       if (u < 0 || v < 0 || u >= color_edges_.cols || v >= color_edges_.rows) continue;
       ++inside;
       if (color_edges_.at<std::uint8_t>(v, u) != 0) ++on_edge;
@@ -281,8 +281,8 @@ TEST_P(OniRecording, DepthIsRegisteredToColourExactlyWhereTheREADMESaysSo) {
     }
   }
   std::cout << "[ registration ] " << GetParam().file << ": depth outlines on colour edges "
-            << identity << " as recorded, best " << best << " at scale " << best_scale
-            << ", shift " << best_dx << ", " << best_dy << " px\n";
+            << identity << " as recorded, best " << best << " at scale " << best_scale << ", shift "
+            << best_dx << ", " << best_dy << " px\n";
   if (GetParam().depth_registered) {
     EXPECT_NEAR(best_scale, 1.0, 0.03);
     EXPECT_LE(std::abs(best_dx), 8);

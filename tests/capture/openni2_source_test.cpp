@@ -1,9 +1,9 @@
 #include "slamd/capture/openni2_source.hpp"
 
-#include <gtest/gtest.h>
-
 #include <cmath>
 #include <filesystem>
+
+#include <gtest/gtest.h>
 
 #include "scoped_temp_dir.hpp"
 #include "test_data.hpp"

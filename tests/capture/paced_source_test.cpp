@@ -1,8 +1,8 @@
 #include "slamd/capture/paced_source.hpp"
 
-#include <gtest/gtest.h>
-
 #include <thread>
+
+#include <gtest/gtest.h>
 
 #include "slamd/capture/preprocessed_source.hpp"
 

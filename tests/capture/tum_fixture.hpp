@@ -3,14 +3,15 @@
 
 #include <filesystem>
 #include <fstream>
-#include <opencv2/imgcodecs.hpp>
-#include <opencv2/imgproc.hpp>
 #include <random>
 #include <string>
 #include <vector>
 
-#include "slamd/capture/tum_source.hpp"
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
 #include "scoped_temp_dir.hpp"
+#include "slamd/capture/tum_source.hpp"
 #include "test_data.hpp"
 
 namespace slamd::test {

@@ -1,10 +1,10 @@
 #include "slamd/capture/tum_source.hpp"
 
-#include <gtest/gtest.h>
-
 #include <cmath>
-#include <opencv2/imgcodecs.hpp>
 #include <random>
+
+#include <gtest/gtest.h>
+#include <opencv2/imgcodecs.hpp>
 
 #include "slamd/capture/tum_dataset.hpp"
 #include "test_data.hpp"

@@ -1,6 +1,6 @@
-#include <gtest/gtest.h>
-
 #include <cmath>
+
+#include <gtest/gtest.h>
 
 #include "slamd/common/camera_intrinsics.hpp"
 #include "slamd/common/rgbd_frame.hpp"

@@ -1,10 +1,11 @@
-#include <gtest/gtest.h>
+#include "slamd/common/config.hpp"
 
 #include <filesystem>
 #include <fstream>
 #include <utility>
 
-#include "slamd/common/config.hpp"
+#include <gtest/gtest.h>
+
 #include "scoped_temp_dir.hpp"
 #include "test_data.hpp"
 
@@ -62,9 +63,9 @@ TEST(Config, DeeplyNestedYamlIsAConfigErrorNotACrash) {
   std::string dashes = "a:\n";
   for (int level = 0; level < 50000; ++level) dashes += "- ";
   dashes += "x\n";
-  for (const auto& [name, text] :
-       {std::pair<std::string, std::string>{"indented", indented}, {"flow", flow},
-        {"dashes", dashes}}) {
+  for (const auto& [name, text] : {std::pair<std::string, std::string>{"indented", indented},
+                                   {"flow", flow},
+                                   {"dashes", dashes}}) {
     const auto path = dir / (name + ".yaml");
     std::ofstream(path) << text;
     try {
@@ -127,7 +128,8 @@ TEST(Config, OutOfRangeValueNamesKeyValueAndRange) {
 }
 
 TEST(Config, WrongTypesAreErrors) {
-  Config config = Config::fromYamlString("a:\n  number: abc\n  flag: maybe\n  list: 3\n  int: 2.5\n");
+  Config config =
+      Config::fromYamlString("a:\n  number: abc\n  flag: maybe\n  list: 3\n  int: 2.5\n");
   EXPECT_THROW(config.getDouble("a.number", 0.0, 0.0, 1.0), ConfigError);
   EXPECT_THROW(config.getBool("a.flag", false), ConfigError);
   EXPECT_THROW(config.getDoubleList("a.list", {}), ConfigError);
@@ -230,12 +232,12 @@ TEST(Config, YamlSubsetReadsNestingSequencesAndQuotes) {
 
 TEST(Config, YamlOutsideTheSubsetIsRefusedNamingTheLine) {
   const std::pair<std::string, std::string> cases[] = {
-      {"a: 1\nb: &anchor 2\n", "line 2"},          // anchors
-      {"a:\n\tb: 1\n", "line 2: a tab"},            // tab indentation
-      {"a: {b: 1}\n", "line 1"},                    // flow mapping
-      {"a: [1, [2, 3]]\n", "line 1: nested"},       // nested sequence
-      {"a: [1, 2\n", "never closed"},               // unclosed
-      {"a: 1\na: 2\n", "given twice"},              // duplicate key
+      {"a: 1\nb: &anchor 2\n", "line 2"},      // anchors
+      {"a:\n\tb: 1\n", "line 2: a tab"},       // tab indentation
+      {"a: {b: 1}\n", "line 1"},               // flow mapping
+      {"a: [1, [2, 3]]\n", "line 1: nested"},  // nested sequence
+      {"a: [1, 2\n", "never closed"},          // unclosed
+      {"a: 1\na: 2\n", "given twice"},         // duplicate key
       {"a: 1\n  b: 2\n", "line 2: unexpected indentation"},
       {"a: \"open\n", "unclosed quote"},
       {"a: 1\x01\n", "control character"},

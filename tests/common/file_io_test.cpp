@@ -3,11 +3,11 @@
 
 #include "slamd/common/file_io.hpp"
 
-#include <gtest/gtest.h>
-
 #include <filesystem>
 #include <fstream>
 #include <sstream>
+
+#include <gtest/gtest.h>
 
 #include "scoped_temp_dir.hpp"
 #include "test_data.hpp"

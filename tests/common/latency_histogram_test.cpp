@@ -1,8 +1,8 @@
-#include <gtest/gtest.h>
+#include "slamd/common/latency_histogram.hpp"
 
 #include <random>
 
-#include "slamd/common/latency_histogram.hpp"
+#include <gtest/gtest.h>
 
 namespace slamd {
 namespace {

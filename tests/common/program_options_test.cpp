@@ -1,8 +1,9 @@
-#include <gtest/gtest.h>
+#include "slamd/common/program_options.hpp"
 
 #include <fstream>
 
-#include "slamd/common/program_options.hpp"
+#include <gtest/gtest.h>
+
 #include "scoped_temp_dir.hpp"
 #include "test_data.hpp"
 
@@ -18,8 +19,15 @@ TEST(ProgramOptions, ParsesConfigSetsOptionsFlagsAndPositionals) {
   options.addFlag("publish", "publish");
   options.setPositional("FILE", 0, 1);
   const std::string config_arg = path.string();
-  const char* argv[] = {"prog", "--config", config_arg.c_str(), "--set", "tracking.max_features=900",
-                        "--set=tracking.frontend=sift", "--publish", "--source=tum:/x", "file.txt"};
+  const char* argv[] = {"prog",
+                        "--config",
+                        config_arg.c_str(),
+                        "--set",
+                        "tracking.max_features=900",
+                        "--set=tracking.frontend=sift",
+                        "--publish",
+                        "--source=tum:/x",
+                        "file.txt"};
   ASSERT_TRUE(options.parse(9, argv));
   EXPECT_EQ(options.value("source"), "tum:/x");
   EXPECT_TRUE(options.flag("publish"));

@@ -1,12 +1,12 @@
 // The tests' temporary folders: removed at scope exit unless kept.
 
-#include <gtest/gtest.h>
+#include "scoped_temp_dir.hpp"
 
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
 
-#include "scoped_temp_dir.hpp"
+#include <gtest/gtest.h>
 
 namespace slamd {
 namespace {

@@ -1,8 +1,8 @@
-#include <gtest/gtest.h>
+#include "slamd/common/se3.hpp"
 
 #include <random>
 
-#include "slamd/common/se3.hpp"
+#include <gtest/gtest.h>
 
 namespace slamd {
 namespace {
@@ -40,7 +40,8 @@ TEST(Se3, LogSo3NearPi) {
 
 TEST(Se3, ExpSo3MatchesEigenAngleAxis) {
   const Eigen::Vector3d phi(0.3, -0.4, 0.5);
-  const Eigen::Matrix3d expected = Eigen::AngleAxisd(phi.norm(), phi.normalized()).toRotationMatrix();
+  const Eigen::Matrix3d expected =
+      Eigen::AngleAxisd(phi.norm(), phi.normalized()).toRotationMatrix();
   EXPECT_LT((expSO3(phi) - expected).norm(), 1e-12);
 }
 
@@ -57,8 +58,9 @@ TEST(Se3, AdjointMovesTwistsBetweenFrames) {
 
 TEST(Se3, LeftJacobianInverseIsTheInverse) {
   const Eigen::Vector3d phi(0.5, 0.1, -0.7);
-  EXPECT_LT((leftJacobianSO3(phi) * leftJacobianInverseSO3(phi) - Eigen::Matrix3d::Identity()).norm(),
-            1e-12);
+  EXPECT_LT(
+      (leftJacobianSO3(phi) * leftJacobianInverseSO3(phi) - Eigen::Matrix3d::Identity()).norm(),
+      1e-12);
 }
 
 TEST(Se3, RotationAngleIsAccurateForTinyAndLargeAngles) {

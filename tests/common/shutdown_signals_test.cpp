@@ -4,11 +4,12 @@
 
 #include "slamd/common/shutdown_signals.hpp"
 
-#include <gtest/gtest.h>
 #include <signal.h>
 #include <unistd.h>
 
 #include <cerrno>
+
+#include <gtest/gtest.h>
 
 namespace slamd {
 namespace {

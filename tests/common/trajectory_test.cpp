@@ -1,8 +1,9 @@
-#include <gtest/gtest.h>
+#include "slamd/common/trajectory.hpp"
 
 #include <fstream>
 
-#include "slamd/common/trajectory.hpp"
+#include <gtest/gtest.h>
+
 #include "scoped_temp_dir.hpp"
 #include "test_data.hpp"
 

@@ -1,9 +1,9 @@
-#include <gtest/gtest.h>
+#include "slamd/comms/frame_codec.hpp"
 
 #include <cmath>
 #include <random>
 
-#include "slamd/comms/frame_codec.hpp"
+#include <gtest/gtest.h>
 
 namespace slamd {
 namespace {
@@ -22,11 +22,12 @@ RgbdFrame makeFrame(int width = 64, int height = 48) {
   std::mt19937 rng(42);
   for (int r = 0; r < height; ++r) {
     for (int c = 0; c < width; ++c) {
-      frame.color_bgr.at<cv::Vec3b>(r, c) = cv::Vec3b(static_cast<uchar>(r * 4), static_cast<uchar>(c * 4), 128);
+      frame.color_bgr.at<cv::Vec3b>(r, c) =
+          cv::Vec3b(static_cast<uchar>(r * 4), static_cast<uchar>(c * 4), 128);
       // Millimetre-exact depths, with holes.
-      frame.depth_m.at<float>(r, c) =
-          (r * c) % 7 == 0 ? std::numeric_limits<float>::quiet_NaN()
-                           : static_cast<float>(500 + (rng() % 4000)) / 1000.0f;
+      frame.depth_m.at<float>(r, c) = (r * c) % 7 == 0
+                                          ? std::numeric_limits<float>::quiet_NaN()
+                                          : static_cast<float>(500 + (rng() % 4000)) / 1000.0f;
     }
   }
   ensureGray(frame);
@@ -51,7 +52,8 @@ void expectDepthEqual(const cv::Mat& a, const cv::Mat& b, float tolerance) {
 TEST(FrameCodec, LosslessEncodingsRoundTripExactly) {
   const RgbdFrame frame = makeFrame();
   for (ColorEncoding color : {ColorEncoding::kRgb8, ColorEncoding::kBgr8, ColorEncoding::kPng}) {
-    for (DepthEncoding depth : {DepthEncoding::kRawU16, DepthEncoding::kPngU16, DepthEncoding::kZlibU16}) {
+    for (DepthEncoding depth :
+         {DepthEncoding::kRawU16, DepthEncoding::kPngU16, DepthEncoding::kZlibU16}) {
       FrameEncodeOptions options;
       options.color = color;
       options.depth = depth;
@@ -106,7 +108,8 @@ TEST(FrameCodec, CorruptCompressedDataIsRejected) {
   msg.depth_data.resize(msg.depth_data.size() / 2);  // truncated zlib stream
   EXPECT_THROW(decodeRgbdFrame(msg), FrameDecodeError);
   msg = encodeRgbdFrame(frame, options);
-  for (std::size_t i = 0; i < msg.color_data.size(); ++i) msg.color_data[i] = static_cast<uint8_t>(i * 31);
+  for (std::size_t i = 0; i < msg.color_data.size(); ++i)
+    msg.color_data[i] = static_cast<uint8_t>(i * 31);
   EXPECT_THROW(decodeRgbdFrame(msg), FrameDecodeError);  // garbage JPEG
   options.depth = DepthEncoding::kPngU16;
   msg = encodeRgbdFrame(frame, options);
@@ -118,7 +121,8 @@ TEST(FrameCodec, KinectFrameRoundTripsInEveryFormat) {
   const RgbdFrame frame = makeFrame();
   for (bool jpeg : {false, true}) {
     for (bool zlib : {false, true}) {
-      const RgbdFrame back = decodeKinectFrame(encodeKinectFrame(frame, jpeg, zlib), frame.intrinsics);
+      const RgbdFrame back =
+          decodeKinectFrame(encodeKinectFrame(frame, jpeg, zlib), frame.intrinsics);
       EXPECT_EQ(back.utime, frame.utime);
       expectDepthEqual(back.depth_m, frame.depth_m, 1e-6f);
       if (!jpeg) {
@@ -167,7 +171,8 @@ void patchHeaderSize(std::vector<std::uint8_t>& bytes, int width, int height) {
     put(20, static_cast<std::uint32_t>(height), 4);
     return;
   }
-  for (std::size_t pos = 2; pos + 9 < bytes.size(); pos += 2 + (bytes[pos + 2] << 8 | bytes[pos + 3])) {
+  for (std::size_t pos = 2; pos + 9 < bytes.size();
+       pos += 2 + (bytes[pos + 2] << 8 | bytes[pos + 3])) {
     if (bytes[pos + 1] == 0xC0) {
       put(pos + 5, static_cast<std::uint32_t>(height), 2);
       put(pos + 7, static_cast<std::uint32_t>(width), 2);
@@ -186,8 +191,8 @@ TEST(FrameCodec, HeaderSizesAreReadWithoutDecoding) {
     EXPECT_EQ(encodedImageSize(message.depth_data.data(), message.depth_data.size()),
               cv::Size(64, 48));
   }
-  const std::uint8_t garbage[] = {1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17,
-                                  18, 19, 20, 21, 22, 23, 24, 25};
+  const std::uint8_t garbage[] = {1,  2,  3,  4,  5,  6,  7,  8,  9,  10, 11, 12, 13,
+                                  14, 15, 16, 17, 18, 19, 20, 21, 22, 23, 24, 25};
   EXPECT_FALSE(encodedImageSize(garbage, sizeof garbage).has_value());
 }
 
@@ -214,7 +219,8 @@ TEST(FrameCodec, AnImageWhoseHeaderClaimsAnotherSizeIsRejectedBeforeDecoding) {
 }
 
 TEST(FrameCodec, AMessageDeclaringMoreThan16MegapixelsIsRejected) {
-  slamd::rgbd_frame_t message = encodeRgbdFrame(makeFrame(64, 48), withPngDepth(ColorEncoding::kPng));
+  slamd::rgbd_frame_t message =
+      encodeRgbdFrame(makeFrame(64, 48), withPngDepth(ColorEncoding::kPng));
   message.width = 8192;
   message.height = 8192;
   EXPECT_THROW(decodeRgbdFrame(message), FrameDecodeError);

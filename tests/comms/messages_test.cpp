@@ -1,8 +1,8 @@
-#include <gtest/gtest.h>
-
 #include <climits>
 #include <cstdint>
 #include <random>
+
+#include <gtest/gtest.h>
 
 #include "bot_core/pose_t.hpp"
 #include "kinect/frame_msg_t.hpp"
@@ -32,8 +32,12 @@ slamd::rgbd_frame_t example() {
   m.utime = 1305031102175304;
   m.sequence = 17;
   m.frame_id = "camera";
-  m.fx = 517.3; m.fy = 516.5; m.cx = 318.6; m.cy = 255.3;
-  m.width = 4; m.height = 2;
+  m.fx = 517.3;
+  m.fy = 516.5;
+  m.cx = 318.6;
+  m.cy = 255.3;
+  m.width = 4;
+  m.height = 2;
   m.distortion_model = slamd::rgbd_frame_t::DISTORTION_PLUMB_BOB;
   const double distortion[5] = {0.2624, -0.9531, -0.0054, 0.0026, 1.1633};
   for (int i = 0; i < 5; ++i) m.distortion[i] = distortion[i];
@@ -54,7 +58,9 @@ slamd::pose_t example() {
   m.sequence = 3;
   m.parent_frame = "world";
   m.child_frame = "camera";
-  m.position[0] = 1.5; m.position[1] = -2; m.position[2] = 0.25;
+  m.position[0] = 1.5;
+  m.position[1] = -2;
+  m.position[2] = 0.25;
   m.orientation[0] = 1;
   for (int i = 0; i < 36; ++i) m.covariance[i] = i * 0.01;
   m.linear_velocity[2] = 0.8;
@@ -67,11 +73,15 @@ slamd::pose_t example() {
 template <>
 slamd::odometry_t example() {
   slamd::odometry_t m{};
-  m.utime = 2000; m.prev_utime = 1000;
-  m.translation[0] = 0.01; m.rotation[0] = 1;
+  m.utime = 2000;
+  m.prev_utime = 1000;
+  m.translation[0] = 0.01;
+  m.rotation[0] = 1;
   m.covariance[0] = 1e-6;
   m.status = slamd::odometry_t::STATUS_INSUFFICIENT_INLIERS;
-  m.num_features = 900; m.num_matches = 300; m.num_inliers = 12;
+  m.num_features = 900;
+  m.num_matches = 300;
+  m.num_inliers = 12;
   m.reprojection_error_px = 0.7;
   m.is_keyframe = true;
   m.reference_keyframe_id = 5;
@@ -82,8 +92,10 @@ template <>
 slamd::vanishing_point_t example() {
   slamd::vanishing_point_t m{};
   m.utime = 5;
-  m.pixel[0] = 320.5; m.pixel[1] = 240.25;
-  m.pixel_covariance[0] = 4; m.pixel_covariance[3] = 4;
+  m.pixel[0] = 320.5;
+  m.pixel[1] = 240.25;
+  m.pixel_covariance[0] = 4;
+  m.pixel_covariance[3] = 4;
   m.direction_camera[2] = 1;
   m.num_supporting_lines = 23;
   m.landmark_id = 1;
@@ -130,17 +142,26 @@ slamd::status_t example() {
   slamd::stage_status_t stage;
   stage.name = "tracking";
   stage.rate_hz = 30;
-  stage.latency_p50_ms = 9; stage.latency_p95_ms = 12; stage.latency_p99_ms = 15;
-  stage.queue_depth = 1; stage.queue_capacity = 4;
-  stage.drops = 2; stage.errors = 1; stage.processed = 900;
+  stage.latency_p50_ms = 9;
+  stage.latency_p95_ms = 12;
+  stage.latency_p99_ms = 15;
+  stage.queue_depth = 1;
+  stage.queue_capacity = 4;
+  stage.drops = 2;
+  stage.errors = 1;
+  stage.processed = 900;
   m.stages = {stage, stage};
   m.stages[1].name = "mapping";
   m.num_stages = 2;
-  m.end_to_end_p50_ms = 10; m.end_to_end_p95_ms = 14; m.end_to_end_p99_ms = 20;
+  m.end_to_end_p50_ms = 10;
+  m.end_to_end_p95_ms = 14;
+  m.end_to_end_p99_ms = 20;
   m.tracking_state = slamd::pose_t::TRACKING_OK;
   m.map_occupied_voxels = 1000;
   m.map_total_voxels = 5000;
-  m.num_keyframes = 40; m.num_loops = 3; m.num_relocalizations = 1;
+  m.num_keyframes = 40;
+  m.num_loops = 3;
+  m.num_relocalizations = 1;
   m.message = "ok";
   return m;
 }
@@ -150,13 +171,15 @@ slamd::keyframe_trajectory_t example() {
   KeyframeTrajectory trajectory;
   trajectory.utime = 15;
   trajectory.sequence = 2;
-  trajectory.T_world_uncorrected = makeSE3(Eigen::Vector3d(0.1, -0.2, 0.05),
-                                           Eigen::Quaterniond(Eigen::AngleAxisd(0.1, Eigen::Vector3d::UnitZ())));
+  trajectory.T_world_uncorrected =
+      makeSE3(Eigen::Vector3d(0.1, -0.2, 0.05),
+              Eigen::Quaterniond(Eigen::AngleAxisd(0.1, Eigen::Vector3d::UnitZ())));
   trajectory.num_loops = 1;
   trajectory.optimization_ms = 4.5;
   for (std::int64_t id = 0; id < 3; ++id) {
     trajectory.keyframes.push_back(KeyframePoseEntry{
-        id, 15 - 3 + id, 0, makeSE3(Eigen::Vector3d(0.3 * id, 0, 0), Eigen::Quaterniond::Identity())});
+        id, 15 - 3 + id, 0,
+        makeSE3(Eigen::Vector3d(0.3 * id, 0, 0), Eigen::Quaterniond::Identity())});
   }
   return toKeyframeTrajectoryMessage(trajectory);
 }
@@ -174,7 +197,10 @@ template <>
 bot_core::pose_t example() {
   bot_core::pose_t m{};
   m.utime = 13;
-  m.pos[0] = 1; m.vel[1] = 2; m.orientation[0] = 1; m.rotation_rate[2] = 0.5;
+  m.pos[0] = 1;
+  m.vel[1] = 2;
+  m.orientation[0] = 1;
+  m.rotation_rate[2] = 0.5;
   return m;
 }
 
@@ -183,12 +209,14 @@ kinect::frame_msg_t example() {
   kinect::frame_msg_t m;
   m.timestamp = 14;
   m.image.timestamp = 14;
-  m.image.width = 2; m.image.height = 1;
+  m.image.width = 2;
+  m.image.height = 1;
   m.image.image_data.assign(6, 1);
   m.image.image_data_nbytes = 6;
   m.image.image_data_format = kinect::image_msg_t::VIDEO_RGB;
   m.depth.timestamp = 14;
-  m.depth.width = 2; m.depth.height = 1;
+  m.depth.width = 2;
+  m.depth.height = 1;
   m.depth.depth_data.assign(4, 2);
   m.depth.depth_data_nbytes = 4;
   m.depth.depth_data_format = kinect::depth_msg_t::DEPTH_MM;
@@ -201,9 +229,10 @@ template <typename M>
 class MessageRoundTrip : public ::testing::Test {};
 
 using AllMessages =
-    ::testing::Types<slamd::rgbd_frame_t, slamd::pose_t, slamd::odometry_t, slamd::vanishing_point_t,
-                     slamd::voxel_map_t, slamd::voxel_map_update_t, slamd::status_t,
-                     slamd::keyframe_trajectory_t, slamd::command_t, bot_core::pose_t, kinect::frame_msg_t>;
+    ::testing::Types<slamd::rgbd_frame_t, slamd::pose_t, slamd::odometry_t,
+                     slamd::vanishing_point_t, slamd::voxel_map_t, slamd::voxel_map_update_t,
+                     slamd::status_t, slamd::keyframe_trajectory_t, slamd::command_t,
+                     bot_core::pose_t, kinect::frame_msg_t>;
 TYPED_TEST_SUITE(MessageRoundTrip, AllMessages);
 
 TYPED_TEST(MessageRoundTrip, EncodeDecodeReproducesTheMessage) {
@@ -234,7 +263,8 @@ TYPED_TEST(MessageRoundTrip, RandomBytesNeverCrashTheDecoder) {
     auto corrupted = bytes;
     // Keep the fingerprint (first 8 bytes) so the corruption reaches the field decoders.
     std::uniform_int_distribution<std::size_t> position(8, corrupted.size() - 1);
-    for (int flips = 0; flips < 4; ++flips) corrupted[position(rng)] ^= static_cast<std::uint8_t>(rng());
+    for (int flips = 0; flips < 4; ++flips)
+      corrupted[position(rng)] ^= static_cast<std::uint8_t>(rng());
     (void)decodeMessage<TypeParam>(corrupted.data(), corrupted.size());
   }
   SUCCEED();
@@ -252,7 +282,8 @@ TYPED_TEST(MessageRoundTrip, AnyLengthFieldOverwrittenWithAHostileValueNeverCras
     for (const std::int32_t value : hostile) {
       auto corrupted = bytes;
       const auto raw = static_cast<std::uint32_t>(value);
-      for (int k = 0; k < 4; ++k) corrupted[at + k] = static_cast<std::uint8_t>(raw >> (24 - 8 * k));
+      for (int k = 0; k < 4; ++k)
+        corrupted[at + k] = static_cast<std::uint8_t>(raw >> (24 - 8 * k));
       const auto decoded = decodeMessage<TypeParam>(corrupted.data(), corrupted.size());
       if (decoded) {
         EXPECT_EQ(encodeMessage(*decoded), corrupted) << "offset " << at;
@@ -350,8 +381,9 @@ TEST(PoseEstimateTransform, ACorrectionRotatesTranslationCovarianceAndVelocityOn
   pose.linear_velocity_world_mps = Eigen::Vector3d(1, 0, 0);
   pose.angular_velocity_camera_radps = Eigen::Vector3d(0, 0, 0.5);
   // A correction turning the world by 90 degrees about z: world x becomes world y.
-  const SE3 T_new_old = makeSE3(Eigen::Vector3d(0, 0, 1),
-                                Eigen::Quaterniond(Eigen::AngleAxisd(M_PI / 2, Eigen::Vector3d::UnitZ())));
+  const SE3 T_new_old =
+      makeSE3(Eigen::Vector3d(0, 0, 1),
+              Eigen::Quaterniond(Eigen::AngleAxisd(M_PI / 2, Eigen::Vector3d::UnitZ())));
   const PoseEstimate moved = transformedPose(pose, T_new_old);
   EXPECT_LT((moved.T_world_camera.matrix() - (T_new_old * pose.T_world_camera).matrix()).norm(),
             1e-12);

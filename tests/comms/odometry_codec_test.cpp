@@ -1,13 +1,12 @@
 // Odometry and vanishing-point messages carry the fields they document.
 
-#include <gtest/gtest.h>
+#include "slamd/comms/odometry_codec.hpp"
 
 #include <cmath>
 #include <cstdint>
 
 #include <Eigen/Geometry>
-
-#include "slamd/comms/odometry_codec.hpp"
+#include <gtest/gtest.h>
 
 namespace slamd {
 namespace {

@@ -1,6 +1,6 @@
-#include <gtest/gtest.h>
-
 #include "slamd/comms/status_codec.hpp"
+
+#include <gtest/gtest.h>
 
 namespace slamd {
 namespace {

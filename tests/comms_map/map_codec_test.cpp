@@ -1,11 +1,12 @@
-#include <gtest/gtest.h>
+#include "slamd/comms/map_codec.hpp"
 
 #include <random>
 #include <set>
 #include <tuple>
 
+#include <gtest/gtest.h>
+
 #include "box_room.hpp"
-#include "slamd/comms/map_codec.hpp"
 #include "slamd/comms/message_codec.hpp"
 #include "slamd/mapping/mapper.hpp"
 
@@ -105,7 +106,7 @@ TEST_P(UpdateStream, AppliedToAnEmptyTreeReproducesTheFullMapsOccupiedSet) {
 INSTANTIATE_TEST_SUITE_P(MapCodec, UpdateStream, ::testing::Bool(),
                          [](const ::testing::TestParamInfo<bool>& param_info) {
                            return param_info.param ? std::string("WithNewFreeVoxels")
-                                             : std::string("OccupiedAndFlipsOnly");
+                                                   : std::string("OccupiedAndFlipsOnly");
                          });
 
 TEST(MapCodec, ALostUpdateOrARebuildWaitsForTheNextFullMap) {

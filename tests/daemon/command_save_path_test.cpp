@@ -3,9 +3,9 @@
 
 #include "slamd/app/command_save_path.hpp"
 
-#include <gtest/gtest.h>
-
 #include <filesystem>
+
+#include <gtest/gtest.h>
 
 #include "scoped_temp_dir.hpp"
 #include "test_data.hpp"
@@ -17,7 +17,6 @@ namespace fs = std::filesystem;
 
 class CommandSavePath : public ::testing::Test {
  protected:
-
   std::optional<std::string> resolve(const std::string& argument) {
     error_.clear();
     return resolveCommandSavePath(argument, dir_.string(), error_);
@@ -52,9 +51,9 @@ TEST_F(CommandSavePath, PathsOutsideTheSaveDirectoryAreRefusedSayingWhy) {
 }
 
 TEST_F(CommandSavePath, NamesAreSanitised) {
-  const std::string names[] = {"",       ".hidden.bt", "map.txt",   "map",
-                               "map.bt\n", "m\xC3\xA4p.bt", "a b.bt", "map.bt;rm",
-                               std::string(200, 'a') + ".bt"};
+  const std::string names[] = {"",       ".hidden.bt", "map.txt",
+                               "map",    "map.bt\n",   "m\xC3\xA4p.bt",
+                               "a b.bt", "map.bt;rm",  std::string(200, 'a') + ".bt"};
   for (const std::string& argument : names) {
     EXPECT_FALSE(resolve(argument).has_value()) << argument;
   }

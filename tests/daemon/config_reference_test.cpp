@@ -2,7 +2,7 @@
 // described (and nothing else), keys are declared once, the sample files load without unknown
 // keys, and the README's reference is the schema's.
 
-#include <gtest/gtest.h>
+#include "slamd/app/config_reference.hpp"
 
 #include <algorithm>
 #include <filesystem>
@@ -10,7 +10,8 @@
 #include <set>
 #include <sstream>
 
-#include "slamd/app/config_reference.hpp"
+#include <gtest/gtest.h>
+
 #include "slamd/mapping/mapping_config.hpp"
 
 namespace slamd {
@@ -104,9 +105,8 @@ TEST(ConfigReference, ReadmeMatchesSchema) {
   const auto body_begin = readme.find('\n', begin) + 1;
   const std::string in_readme = readme.substr(body_begin, end - body_begin);
   const std::string expected = "\n" + configReferenceMarkdown(describeConfiguration("")) + "\n";
-  EXPECT_EQ(in_readme, expected)
-      << "the README's configuration reference is out of date: run "
-         "scripts/update-config-reference.sh";
+  EXPECT_EQ(in_readme, expected) << "the README's configuration reference is out of date: run "
+                                    "scripts/update-config-reference.sh";
 }
 
 }  // namespace

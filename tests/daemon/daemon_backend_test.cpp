@@ -2,12 +2,12 @@
 // found, the graph re-optimised, and the written trajectory (every frame at its keyframe's
 // optimised pose) is more accurate than the same run without the back end.
 
-#include <gtest/gtest.h>
-
 #include <cmath>
 #include <cstdio>
 #include <string>
 #include <vector>
+
+#include <gtest/gtest.h>
 
 #include "daemon_fixture.hpp"
 #include "slamd/common/program_options.hpp"

@@ -2,17 +2,17 @@
 // The in-process daemon fixture: a small (320x240) synthetic world, in-process LCM (memq://), a
 // temporary folder for outputs.
 
-#include <gtest/gtest.h>
-
 #include <filesystem>
 #include <string>
 
+#include <gtest/gtest.h>
+
+#include "scoped_temp_dir.hpp"
 #include "slamd/app/slam_daemon.hpp"
 #include "slamd/common/config.hpp"
 #include "slamd/common/log.hpp"
 #include "slamd/common/program_options.hpp"
 #include "slamd/common/shutdown_signals.hpp"
-#include "scoped_temp_dir.hpp"
 
 namespace slamd {
 

@@ -2,15 +2,14 @@
 // threads, queues and shutdown path, also run under ThreadSanitizer (`make tsan`).
 
 #include <gtest/gtest.h>
-
 #include <opencv2/core.hpp>
 
+#include "daemon_fixture.hpp"
 #include "slamd/app/slam_daemon.hpp"
 #include "slamd/capture/frame_source.hpp"
 #include "slamd/common/log.hpp"
 #include "slamd/common/program_options.hpp"
 #include "slamd/common/trajectory.hpp"
-#include "daemon_fixture.hpp"
 #include "test_data.hpp"
 
 namespace slamd {

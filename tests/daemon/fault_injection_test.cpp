@@ -20,7 +20,8 @@ namespace {
 class DropoutSource : public FrameSource {
  public:
   /// @param windows_s [start, end) offsets from the first frame's capture time, seconds
-  DropoutSource(std::unique_ptr<FrameSource> inner, std::vector<std::pair<double, double>> windows_s)
+  DropoutSource(std::unique_ptr<FrameSource> inner,
+                std::vector<std::pair<double, double>> windows_s)
       : inner_(std::move(inner)), windows_s_(std::move(windows_s)) {}
 
   void open() override { inner_->open(); }
@@ -62,11 +63,12 @@ TEST_F(DaemonFaultInjection, ACameraThatDropsOutAndReturnsIsTrackedAgainWithinAS
     return std::make_unique<DropoutSource>(std::move(source), dropouts);
   };
   const DaemonSummary summary = runToEnd(config, overrides);
-  std::printf("dropouts of 0.6, 1.5 and 3 s: %llu gaps seen (longest %.2f s), tracking measured "
-              "again at most %.3f s after the frames returned; %llu of %llu poses measured\n",
-              static_cast<unsigned long long>(summary.capture_gaps), summary.longest_capture_gap_s,
-              summary.longest_resume_s, static_cast<unsigned long long>(summary.poses_tracked),
-              static_cast<unsigned long long>(summary.poses_published));
+  std::printf(
+      "dropouts of 0.6, 1.5 and 3 s: %llu gaps seen (longest %.2f s), tracking measured "
+      "again at most %.3f s after the frames returned; %llu of %llu poses measured\n",
+      static_cast<unsigned long long>(summary.capture_gaps), summary.longest_capture_gap_s,
+      summary.longest_resume_s, static_cast<unsigned long long>(summary.poses_tracked),
+      static_cast<unsigned long long>(summary.poses_published));
   EXPECT_EQ(summary.capture_gaps, 3u);
   EXPECT_NEAR(summary.longest_capture_gap_s, 3.0, 0.1);
   EXPECT_TRUE(summary.resumed_after_last_gap);

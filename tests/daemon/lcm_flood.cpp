@@ -42,7 +42,8 @@ std::vector<slamd::rgbd_frame_t> encodeAllFrames(const std::string& source_name,
   while (true) {
     const FrameRead read = source->next(std::chrono::milliseconds(5000));
     if (read.status == FrameRead::Status::kEndOfStream) break;
-    if (read.status == FrameRead::Status::kFrame) frames.push_back(encodeRgbdFrame(*read.frame, options));
+    if (read.status == FrameRead::Status::kFrame)
+      frames.push_back(encodeRgbdFrame(*read.frame, options));
   }
   source->close();
   return frames;
@@ -61,9 +62,10 @@ Bytes malformedCommand() {
 }  // namespace
 
 int main(int argc, char** argv) {
-  ProgramOptions options("slamd-test-flood",
-                         "Publishes a camera on LCM at its rate, with a flood of valid and malformed "
-                         "frames and commands around it.");
+  ProgramOptions options(
+      "slamd-test-flood",
+      "Publishes a camera on LCM at its rate, with a flood of valid and malformed "
+      "frames and commands around it.");
   options.addOption("source", "SOURCE", "frames to publish (tum:DIR)");
   options.addOption("seconds", "S", "how long to publish (the frames loop)", "10");
   options.addOption("rate-hz", "HZ", "the camera's frame rate", "30");
@@ -79,7 +81,8 @@ int main(int argc, char** argv) {
     const double rate_hz = std::stod(options.value("rate-hz"));
     const int factor = std::stoi(options.value("factor"));
     std::mt19937 random(static_cast<unsigned>(std::stoul(options.value("seed"))));
-    const std::vector<slamd::rgbd_frame_t> frames = encodeAllFrames(options.value("source"), config);
+    const std::vector<slamd::rgbd_frame_t> frames =
+        encodeAllFrames(options.value("source"), config);
     if (frames.empty()) throw std::runtime_error("no frames in " + options.value("source"));
 
     slamd::command_t refused_save;
@@ -103,8 +106,8 @@ int main(int argc, char** argv) {
       const Utime now = wallClockUtime();
       for (int k = 0; k < factor; ++k) {
         std::this_thread::sleep_until(
-            start + std::chrono::duration_cast<std::chrono::steady_clock::duration>(period * i +
-                                                                                    slot * k));
+            start +
+            std::chrono::duration_cast<std::chrono::steady_clock::duration>(period * i + slot * k));
         frame.utime = now + static_cast<Utime>(1e6 / rate_hz * k / factor);
         switch (k) {
           case 0:

@@ -10,9 +10,9 @@
 #include <vector>
 
 #include "slamd/command_t.hpp"
+#include "slamd/comms/lcm_bus.hpp"
 #include "slamd/pose_t.hpp"
 #include "slamd/status_t.hpp"
-#include "slamd/comms/lcm_bus.hpp"
 
 int main(int argc, char** argv) {
   if (argc < 3) {
@@ -36,11 +36,13 @@ int main(int argc, char** argv) {
         for (auto& b : bytes) b = static_cast<std::uint8_t>(rng());
         break;
       case 1:  // a valid message cut short
-        bytes.assign(valid_bytes.begin(), valid_bytes.begin() + static_cast<long>(rng() % valid_bytes.size()));
+        bytes.assign(valid_bytes.begin(),
+                     valid_bytes.begin() + static_cast<long>(rng() % valid_bytes.size()));
         break;
       case 2:  // a valid fingerprint followed by a corrupted length field
         bytes = valid_bytes;
-        for (std::size_t j = 8; j < bytes.size(); j += 3) bytes[j] = static_cast<std::uint8_t>(rng());
+        for (std::size_t j = 8; j < bytes.size(); j += 3)
+          bytes[j] = static_cast<std::uint8_t>(rng());
         bytes[17] = 0x7f;
         break;
       default: {  // a valid fingerprint, then a string whose length field is INT32_MIN
@@ -56,7 +58,8 @@ int main(int argc, char** argv) {
           hash = slamd::status_t::getHash();
           before_string = 8 + 4 + 3 * 8 + 1 + 2 * 8 + 3 * 4;
         }
-        for (int k = 0; k < 8; ++k) bytes.push_back(static_cast<std::uint8_t>(hash >> (56 - 8 * k)));
+        for (int k = 0; k < 8; ++k)
+          bytes.push_back(static_cast<std::uint8_t>(hash >> (56 - 8 * k)));
         bytes.resize(8 + before_string, 0);
         for (const std::uint8_t b : {0x80, 0x00, 0x00, 0x00, 0x41, 0x42}) bytes.push_back(b);
         break;

@@ -2,13 +2,14 @@
 // namespace and reports its log on failure. Needs root (unshare -n) and lcm-logger; skips with a
 // message otherwise.
 
-#include <gtest/gtest.h>
 #include <unistd.h>
 
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
+
+#include <gtest/gtest.h>
 
 #include "scoped_temp_dir.hpp"
 #include "test_data.hpp"
@@ -34,7 +35,8 @@ class DaemonScenario : public ::testing::Test {
     if (std::system("unshare -n true > /dev/null 2>&1") != 0) {
       GTEST_SKIP() << "'unshare -n' is not available here";
     }
-    if (std::system("command -v lcm-logger > /dev/null && command -v lcm-logplayer > /dev/null") != 0) {
+    if (std::system("command -v lcm-logger > /dev/null && command -v lcm-logplayer > /dev/null") !=
+        0) {
       GTEST_SKIP() << "lcm-logger/lcm-logplayer not installed (Debian package liblcm-bin)";
     }
   }

@@ -3,9 +3,7 @@
 // before it queued, and each step's trace shows that it processed all of those before its reset
 // and none after.
 
-#include <gtest/gtest.h>
-
-#include <opencv2/core.hpp>
+#include "slamd/app/stage_steps.hpp"
 
 #include <algorithm>
 #include <atomic>
@@ -15,8 +13,10 @@
 #include <thread>
 #include <vector>
 
+#include <gtest/gtest.h>
+#include <opencv2/core.hpp>
+
 #include "daemon_fixture.hpp"
-#include "slamd/app/stage_steps.hpp"
 #include "slamd/backend/vocabulary.hpp"
 #include "slamd/pipeline/drop_oldest_queue.hpp"
 #include "slamd/pipeline/spsc_queue.hpp"

@@ -1,9 +1,10 @@
-#include <gtest/gtest.h>
+#include "slamd/eval/trajectory_error.hpp"
 
 #include <cmath>
 #include <random>
 
-#include "slamd/eval/trajectory_error.hpp"
+#include <gtest/gtest.h>
+
 #include "slamd/eval/trajectory_plot.hpp"
 #include "test_data.hpp"
 
@@ -18,8 +19,8 @@ Trajectory wavyTrajectory(double start_s = 1000.0) {
     StampedPose pose;
     pose.timestamp_s = start_s + t;
     Vector6d xi;
-    xi << std::sin(0.3 * t), 0.5 * std::cos(0.2 * t), 0.1 * t, 0.2 * std::sin(0.5 * t),
-        0.1 * t, 0.05 * std::cos(t);
+    xi << std::sin(0.3 * t), 0.5 * std::cos(0.2 * t), 0.1 * t, 0.2 * std::sin(0.5 * t), 0.1 * t,
+        0.05 * std::cos(t);
     pose.T_world_camera = expSE3(xi);
     trajectory.push_back(pose);
   }

@@ -34,14 +34,14 @@ inline std::vector<Segment3> corridorSegments() {
     s.push_back({{x, y, kStart}, {x, y, kEnd}, grey});
   };
   for (double x : {-kHalfWidth, kHalfWidth}) {
-    along(x, kFloor, 30);     // wall-floor edge
-    along(x, kCeiling, 60);   // wall-ceiling edge
+    along(x, kFloor, 30);        // wall-floor edge
+    along(x, kCeiling, 60);      // wall-ceiling edge
     along(x, kFloor - 0.1, 50);  // skirting board
-    along(x, 0.2, 70);        // handrail
+    along(x, 0.2, 70);           // handrail
   }
   for (double x : {-0.5, 0.0, 0.5}) along(x, kFloor, 80);  // floor tile joints along the corridor
   for (double x : {-0.33, 0.33}) along(x, kCeiling, 90);   // ceiling light strip
-  for (double z = kStart; z <= kEnd; z += 1.0) {          // transverse floor joints
+  for (double z = kStart; z <= kEnd; z += 1.0) {           // transverse floor joints
     s.push_back({{-kHalfWidth, kFloor, z}, {kHalfWidth, kFloor, z}, 80});
   }
   for (double z = 2.0; z <= kEnd; z += 5.0) {  // door frames, alternating sides
@@ -55,8 +55,7 @@ inline std::vector<Segment3> corridorSegments() {
 }
 
 /// Renders the corridor seen from T_world_camera (corridor frame <- camera), CV_8UC1.
-inline cv::Mat renderCorridor(const CameraIntrinsics& K, const SE3& T_world_camera,
-                              unsigned seed) {
+inline cv::Mat renderCorridor(const CameraIntrinsics& K, const SE3& T_world_camera, unsigned seed) {
   cv::Mat image(K.height, K.width, CV_8UC1);
   // Textured background: smooth noise (plaster-like), too weak for Canny's thresholds.
   cv::Mat noise(K.height, K.width, CV_32FC1);

@@ -92,8 +92,8 @@ SimResult simulate(const SimParams& p) {
     EXPECT_EQ(ekf.predict(measured_step, odometry_cov, 1.0 / 30.0), EkfPredictStatus::kOk);
 
     const Eigen::Vector3d d_camera = truth.linear().transpose() * Eigen::Vector3d::UnitZ();
-    Eigen::Vector2d pixel = K.project(d_camera) +
-                            p.vp_sigma_px * Eigen::Vector2d(normal(rng), normal(rng));
+    Eigen::Vector2d pixel =
+        K.project(d_camera) + p.vp_sigma_px * Eigen::Vector2d(normal(rng), normal(rng));
     const bool outlier = unit(rng) < p.outlier_rate;
     if (outlier) pixel = Eigen::Vector2d(unit(rng) * 639.0, unit(rng) * 479.0);
     const VpUpdateResult r = ekf.updateVanishingPoint(pixel, vp_cov);
@@ -160,10 +160,11 @@ TEST(CorridorSimulation, FilterIsConsistentNeesAndNisWithinChiSquareBounds) {
   EXPECT_LE(mean_nis, chiSquareQuantile(2.0 * n, 1.96) / n);
   RecordProperty("mean_nis", std::to_string(mean_nis));
   RecordProperty("mean_nees", std::to_string(mean_nees));
-  std::printf("mean NIS %.3f over %zu (band %.3f..%.3f), mean ANEES %.3f, %.0f%% of steps in "
-              "[%.2f, %.2f]\n",
-              mean_nis, count, chiSquareQuantile(2.0 * n, -1.96) / n,
-              chiSquareQuantile(2.0 * n, 1.96) / n, mean_nees, 100.0 * fraction_inside, lo, hi);
+  std::printf(
+      "mean NIS %.3f over %zu (band %.3f..%.3f), mean ANEES %.3f, %.0f%% of steps in "
+      "[%.2f, %.2f]\n",
+      mean_nis, count, chiSquareQuantile(2.0 * n, -1.96) / n, chiSquareQuantile(2.0 * n, 1.96) / n,
+      mean_nees, 100.0 * fraction_inside, lo, hi);
 }
 
 TEST(CorridorSimulation, DefaultGateKeepsTheFilterNearlyConsistent) {
@@ -208,10 +209,11 @@ void expectDriftReduction(double outlier_rate) {
   const double rot_ekf = std::sqrt(sq_rot_ekf / kRuns) * kRadToDeg;
   const double ate_odometry = std::sqrt(sq_ate_odometry / kRuns);
   const double ate_ekf = std::sqrt(sq_ate_ekf / kRuns);
-  std::printf("outliers %.0f%%: final yaw/pitch error RMS odometry %.3f deg, EKF %.3f deg; ATE RMS "
-              "odometry %.3f m, EKF %.3f m; outliers accepted %d of %d\n",
-              100.0 * outlier_rate, rot_odometry, rot_ekf, ate_odometry, ate_ekf,
-              outliers_accepted, outliers);
+  std::printf(
+      "outliers %.0f%%: final yaw/pitch error RMS odometry %.3f deg, EKF %.3f deg; ATE RMS "
+      "odometry %.3f m, EKF %.3f m; outliers accepted %d of %d\n",
+      100.0 * outlier_rate, rot_odometry, rot_ekf, ate_odometry, ate_ekf, outliers_accepted,
+      outliers);
   EXPECT_LT(rot_ekf * 5.0, rot_odometry);
   EXPECT_LT(ate_ekf * 2.0, ate_odometry);
   if (outliers > 0) {
@@ -253,10 +255,12 @@ TEST(CorridorSimulation, FilterStageOnRenderedCorridorImagesBeatsOdometry) {
     max_ekf_error = std::max(max_ekf_error, yawPitchError(truePose(k), out.pose.T_world_camera));
   }
   const double odometry_error = yawPitchError(truePose(kSteps), odometry) * kRadToDeg;
-  const double ekf_error = yawPitchError(truePose(kSteps), filter.ekf().T_world_camera()) * kRadToDeg;
-  std::printf("rendered corridor, %d frames: final yaw/pitch error odometry %.3f deg, filter %.3f "
-              "deg (max %.3f deg), %d of %d vanishing points accepted\n",
-              kSteps, odometry_error, ekf_error, max_ekf_error * kRadToDeg, accepted, kSteps);
+  const double ekf_error =
+      yawPitchError(truePose(kSteps), filter.ekf().T_world_camera()) * kRadToDeg;
+  std::printf(
+      "rendered corridor, %d frames: final yaw/pitch error odometry %.3f deg, filter %.3f "
+      "deg (max %.3f deg), %d of %d vanishing points accepted\n",
+      kSteps, odometry_error, ekf_error, max_ekf_error * kRadToDeg, accepted, kSteps);
   EXPECT_GT(accepted, kSteps * 8 / 10);
   // The absolute yaw/pitch error is bounded by the landmark's initial error (odometry drift over
   // the frames that confirm it) plus the drift during its 10-frame probation (no updates yet),

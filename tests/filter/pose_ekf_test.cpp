@@ -37,14 +37,16 @@ TEST(PoseEkf, MotionJacobiansMatchCentralDifferences) {
     for (int k = 0; k < 6; ++k) {
       Vector6d e = Vector6d::Zero();
       e(k) = kStep;
-      F_num.col(k) = (PoseEkf::boxminus(PoseEkf::boxplus(T_world_prev, e) * T_prev_curr, nominal) -
-                      PoseEkf::boxminus(PoseEkf::boxplus(T_world_prev, -e) * T_prev_curr, nominal)) /
-                     (2 * kStep);
+      F_num.col(k) =
+          (PoseEkf::boxminus(PoseEkf::boxplus(T_world_prev, e) * T_prev_curr, nominal) -
+           PoseEkf::boxminus(PoseEkf::boxplus(T_world_prev, -e) * T_prev_curr, nominal)) /
+          (2 * kStep);
       // Odometry noise in odometry_t's convention: translation additive in the previous frame,
       // rotation right-perturbed: the same boxplus applied to T_prev_curr's own components.
-      G_num.col(k) = (PoseEkf::boxminus(T_world_prev * PoseEkf::boxplus(T_prev_curr, e), nominal) -
-                      PoseEkf::boxminus(T_world_prev * PoseEkf::boxplus(T_prev_curr, -e), nominal)) /
-                     (2 * kStep);
+      G_num.col(k) =
+          (PoseEkf::boxminus(T_world_prev * PoseEkf::boxplus(T_prev_curr, e), nominal) -
+           PoseEkf::boxminus(T_world_prev * PoseEkf::boxplus(T_prev_curr, -e), nominal)) /
+          (2 * kStep);
     }
     EXPECT_LT((F - F_num).cwiseAbs().maxCoeff(), 1e-7) << "F\n" << F << "\nnumeric\n" << F_num;
     EXPECT_LT((G - G_num).cwiseAbs().maxCoeff(), 1e-7) << "G\n" << G << "\nnumeric\n" << G_num;
@@ -54,16 +56,18 @@ TEST(PoseEkf, MotionJacobiansMatchCentralDifferences) {
 /// Central-difference Jacobians of a 2-vector function h(R, d) of a rotation (right perturbation)
 /// and a unit direction (tangent perturbation, retractDirection) at (R, d).
 template <typename Function>
-void numericDirectionJacobians(const Function& h, const Eigen::Matrix3d& R, const Eigen::Vector3d& d,
-                               Eigen::Matrix<double, 2, 3>* H_rotation, Eigen::Matrix2d* H_direction) {
+void numericDirectionJacobians(const Function& h, const Eigen::Matrix3d& R,
+                               const Eigen::Vector3d& d, Eigen::Matrix<double, 2, 3>* H_rotation,
+                               Eigen::Matrix2d* H_direction) {
   for (int k = 0; k < 3; ++k) {
     const Eigen::Vector3d e = kStep * Eigen::Vector3d::Unit(k);
     H_rotation->col(k) = (h(R * expSO3(e), d) - h(R * expSO3(-e), d)) / (2 * kStep);
   }
   for (int k = 0; k < 2; ++k) {
     const Eigen::Vector2d e = kStep * Eigen::Vector2d::Unit(k);
-    H_direction->col(k) = (h(R, PoseEkf::retractDirection(d, e)) -
-                           h(R, PoseEkf::retractDirection(d, -e))) / (2 * kStep);
+    H_direction->col(k) =
+        (h(R, PoseEkf::retractDirection(d, e)) - h(R, PoseEkf::retractDirection(d, -e))) /
+        (2 * kStep);
   }
 }
 
@@ -73,8 +77,7 @@ TEST(PoseEkf, ProjectionJacobiansMatchCentralDifferences) {
   for (int trial = 0; trial < 10; ++trial) {
     const Eigen::Matrix3d R = randomPose(rng, 0.0, 0.3).linear();
     // A direction roughly in front of the camera, and its x-heavy variant (other tangent basis).
-    const Eigen::Vector3d d =
-        (R * Eigen::Vector3d(trial % 2 ? 0.95 : 0.2, -0.1, 1.0)).normalized();
+    const Eigen::Vector3d d = (R * Eigen::Vector3d(trial % 2 ? 0.95 : 0.2, -0.1, 1.0)).normalized();
     Eigen::Vector2d pixel;
     Eigen::Matrix<double, 2, 3> H_rot;
     Eigen::Matrix2d H_dir;
@@ -260,17 +263,15 @@ TEST(PoseEkf, BadPlaneAxisIsRejectedAndCounted) {
   EXPECT_EQ(ekf.updateDirection(Eigen::Vector3d::UnitY(), not_positive).status,
             VpUpdateStatus::kBadMeasurement);
   EXPECT_EQ(ekf.counters().bad_measurements, 3);
-  EXPECT_EQ(ekf.updateDirection(Eigen::Vector3d::UnitY(), good).status,
-            VpUpdateStatus::kCandidate);
+  EXPECT_EQ(ekf.updateDirection(Eigen::Vector3d::UnitY(), good).status, VpUpdateStatus::kCandidate);
 }
 
 TEST(PoseEkf, AcceptsAConsistentVanishingPointAndShrinksRotationUncertainty) {
   OneLandmarkFixture f;
   ASSERT_EQ(f.id, 0);
   const Matrix6d before = f.ekf.poseCovariance();
-  const VpUpdateResult r =
-      f.ekf.updateVanishingPoint(Eigen::Vector2d(f.K.cx + 1.0, f.K.cy - 0.5),
-                                 Eigen::Matrix2d::Identity());
+  const VpUpdateResult r = f.ekf.updateVanishingPoint(Eigen::Vector2d(f.K.cx + 1.0, f.K.cy - 0.5),
+                                                      Eigen::Matrix2d::Identity());
   EXPECT_EQ(r.status, VpUpdateStatus::kAccepted);
   EXPECT_TRUE(r.accepted);
   EXPECT_EQ(r.landmark_id, f.id);
@@ -303,20 +304,22 @@ TEST(PoseEkf, RejectsAWrongVanishingPointByGating) {
   EXPECT_EQ(f.ekf.counters().updates_gated, 1);
   // Close to the landmark's axis (within 20 degrees): never a new landmark however often seen.
   for (int i = 0; i < 5; ++i) {
-    EXPECT_EQ(f.ekf.updateVanishingPoint(Eigen::Vector2d(f.K.cx + 60.0, f.K.cy + 5.0),
-                                         Eigen::Matrix2d::Identity())
+    EXPECT_EQ(f.ekf
+                  .updateVanishingPoint(Eigen::Vector2d(f.K.cx + 60.0, f.K.cy + 5.0),
+                                        Eigen::Matrix2d::Identity())
                   .status,
               VpUpdateStatus::kGated);
   }
   EXPECT_EQ(f.ekf.landmarks().size(), 1u);
   // The same with the known-association entry point.
-  EXPECT_EQ(f.ekf.updateLandmark(f.id, Eigen::Vector2d(f.K.cx - 50.0, f.K.cy),
-                                 Eigen::Matrix2d::Identity())
-                .status,
-            VpUpdateStatus::kGated);
-  EXPECT_EQ(f.ekf.updateLandmark(99, Eigen::Vector2d(f.K.cx, f.K.cy), Eigen::Matrix2d::Identity())
-                .status,
-            VpUpdateStatus::kUnknownLandmark);
+  EXPECT_EQ(
+      f.ekf
+          .updateLandmark(f.id, Eigen::Vector2d(f.K.cx - 50.0, f.K.cy), Eigen::Matrix2d::Identity())
+          .status,
+      VpUpdateStatus::kGated);
+  EXPECT_EQ(
+      f.ekf.updateLandmark(99, Eigen::Vector2d(f.K.cx, f.K.cy), Eigen::Matrix2d::Identity()).status,
+      VpUpdateStatus::kUnknownLandmark);
 }
 
 TEST(PoseEkf, CreatesALandmarkOnlyFromConsistentDetections) {
@@ -546,8 +549,8 @@ TEST(PoseEkf, LostFramesDoNotRollTheCameraAboutTheVanishingDirection) {
     const VpUpdateResult result = ekf.updateVanishingPoint(vp, 0.04 * Eigen::Matrix2d::Identity());
     if (frame >= 30 && result.status == VpUpdateStatus::kAccepted) {
       ++accepted_after_loss;
-      min_variance_ratio = std::min(
-          min_variance_ratio, varianceAboutDirection(ekf, corridor_world) / variance_before);
+      min_variance_ratio = std::min(min_variance_ratio,
+                                    varianceAboutDirection(ekf, corridor_world) / variance_before);
     }
     // The missed pan about the pitched camera's y axis is 0.15 degrees about z: odometry's error.
     if (frame == 31) roll_after_loss_deg = rollAboutZDeg(ekf.T_world_camera(), T_world_true);
@@ -591,7 +594,8 @@ double rotationErrorAfterOdometryJump(int reanchor_detections, double scatter_px
     T_world_true = T_world_true * step_true;
     SE3 step_measured = step_true;
     if (frame == 150) {
-      step_measured.linear() = step_true.linear() * expSO3(Eigen::Vector3d(0.5 * M_PI / 180.0, 0, 0));
+      step_measured.linear() =
+          step_true.linear() * expSO3(Eigen::Vector3d(0.5 * M_PI / 180.0, 0, 0));
     }
     ekf.predict(step_measured, tight, kDt);
     Eigen::Vector2d vp = K.project(T_world_true.linear().transpose() * corridor_world) +

@@ -11,9 +11,9 @@
 #include <gtest/gtest.h>
 #include <opencv2/imgcodecs.hpp>
 
+#include "noisy_odometry.hpp"
 #include "slamd/common/trajectory.hpp"
 #include "slamd/filter/vanishing_point_filter.hpp"
-#include "noisy_odometry.hpp"
 #include "test_data.hpp"
 
 namespace slamd {
@@ -32,7 +32,8 @@ std::vector<ImageEntry> readImageList(const std::filesystem::path& root) {
     if (line.empty() || line[0] == '#') continue;
     std::istringstream fields(line);
     ImageEntry e;
-    if (fields >> e.timestamp_s >> e.path) list.push_back({e.timestamp_s, (root / e.path).string()});
+    if (fields >> e.timestamp_s >> e.path)
+      list.push_back({e.timestamp_s, (root / e.path).string()});
   }
   return list;
 }
@@ -40,7 +41,8 @@ std::vector<ImageEntry> readImageList(const std::filesystem::path& root) {
 const StampedPose* nearest(const Trajectory& t, double timestamp_s) {
   const StampedPose* best = nullptr;
   for (const auto& p : t) {
-    if (!best || std::abs(p.timestamp_s - timestamp_s) < std::abs(best->timestamp_s - timestamp_s)) {
+    if (!best ||
+        std::abs(p.timestamp_s - timestamp_s) < std::abs(best->timestamp_s - timestamp_s)) {
       best = &p;
     }
   }
@@ -91,16 +93,17 @@ TEST(TumFr1Xyz, VanishingPointsDoNotHurtWithoutACorridor) {
     gated += out.update && out.update->status == VpUpdateStatus::kGated;
     const SE3 relative_truth = first->T_world_camera.inverse() * gt->T_world_camera;
     sq_odometry += (relative_truth.translation() - odometry.translation()).squaredNorm();
-    sq_filter += (relative_truth.translation() - out.pose.T_world_camera.translation()).squaredNorm();
+    sq_filter +=
+        (relative_truth.translation() - out.pose.T_world_camera.translation()).squaredNorm();
     ++frames;
     previous = gt;
   }
   const double ate_odometry = std::sqrt(sq_odometry / frames);
   const double ate_filter = std::sqrt(sq_filter / frames);
-  std::printf("fr1/xyz %d frames: %d vanishing points, %d accepted, %d gated, %zu landmarks; ATE "
-              "odometry %.4f m, filter %.4f m\n",
-              frames, detected, accepted, gated, filter.ekf().landmarks().size(), ate_odometry,
-              ate_filter);
+  std::printf(
+      "fr1/xyz %d frames: %d vanishing points, %d accepted, %d gated, %zu landmarks; ATE "
+      "odometry %.4f m, filter %.4f m\n",
+      frames, detected, accepted, gated, filter.ekf().landmarks().size(), ate_odometry, ate_filter);
   EXPECT_GT(frames, 250);
   EXPECT_LE(ate_filter, 1.05 * ate_odometry);
 }

@@ -29,7 +29,7 @@ void expectCorridorWithin2Px(const std::string& detector_name, double image_scal
   config.image_scale = image_scale;
   if (image_scale == 1.0) config.blur_kernel_px = 5;
   VanishingPointDetector detector(K, config);
-  const CorridorPose poses[] = {{0, 0, 0, 0, 0},      {6, -3, 2, 0.3, 0},  {-9, 4, -3, -0.4, 0.2},
+  const CorridorPose poses[] = {{0, 0, 0, 0, 0},       {6, -3, 2, 0.3, 0},  {-9, 4, -3, -0.4, 0.2},
                                 {15, 0, 0, 0.5, -0.1}, {-4, -7, 5, 0, 0.3}, {2, 8, -6, -0.6, -0.2}};
   unsigned seed = 1;
   for (const auto& p : poses) {
@@ -73,7 +73,7 @@ TEST(VanishingPointDetector, FindsSyntheticCorridorPointWithin2PxWithLsd) {
 /// it (a camera integrating over the pixel area), plus Gaussian noise: its edges are straight
 /// lines through vp_px at sub-pixel positions. Sector edges avoid the image axes by 10+ degrees.
 cv::Mat renderPinwheel(const CameraIntrinsics& K, const Eigen::Vector2d& vp_px, unsigned seed) {
-  const double edges_deg[] = {15.0, 40.0, 62.0, 118.0, 145.0, 165.0,
+  const double edges_deg[] = {15.0,  40.0,  62.0,  118.0, 145.0, 165.0,
                               197.0, 222.0, 250.0, 290.0, 318.0, 340.0};
   const std::uint8_t shades[] = {60, 170, 90, 200, 70, 150, 100, 210, 80, 180, 110, 190};
   constexpr int kSub = 8;
@@ -197,7 +197,8 @@ TEST(VanishingPointDetector, RejectsParallelAndDegenerateSegments) {
   VanishingPointDetector detector(K, VanishingPointConfig{});
   std::vector<LineSegment> parallel;
   for (int i = 0; i < 10; ++i) {
-    parallel.push_back({Eigen::Vector2d(50.0, 10.0 + 30 * i), Eigen::Vector2d(250.0, 60.0 + 30 * i)});
+    parallel.push_back(
+        {Eigen::Vector2d(50.0, 10.0 + 30 * i), Eigen::Vector2d(250.0, 60.0 + 30 * i)});
   }
   EXPECT_NE(detector.estimateFromSegments(parallel).status, VanishingPointStatus::kOk);
   std::vector<LineSegment> broken(6, LineSegment{Eigen::Vector2d(1, 1), Eigen::Vector2d(1, 1)});

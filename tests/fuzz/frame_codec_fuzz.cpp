@@ -16,8 +16,8 @@ namespace {
 using namespace slamd;
 using slamd::fuzz::FrameCodecKind;
 
-constexpr double kDepthScales[] = {1000.0, 5000.0, 0.0, -1.0,
-                                   std::numeric_limits<double>::quiet_NaN(), 1e-300};
+constexpr double kDepthScales[] = {
+    1000.0, 5000.0, 0.0, -1.0, std::numeric_limits<double>::quiet_NaN(), 1e-300};
 
 void decodeAsRgbdFrame(const fuzz::FrameCodecInput& in) {
   slamd::rgbd_frame_t msg;

@@ -15,17 +15,17 @@
 #include <string>
 #include <vector>
 
-#include <opencv2/imgproc.hpp>
 #include <octomap/ColorOcTree.h>
 #include <octomap/OcTree.h>
+#include <opencv2/imgproc.hpp>
 
 #include "frame_codec_layout.hpp"
-#include "slamd/comms/odometry_codec.hpp"
 #include "slamd/backend/vocabulary.hpp"
 #include "slamd/common/config.hpp"
 #include "slamd/comms/frame_codec.hpp"
 #include "slamd/comms/map_codec.hpp"
 #include "slamd/comms/message_codec.hpp"
+#include "slamd/comms/odometry_codec.hpp"
 #include "slamd/comms/pose_codec.hpp"
 #include "slamd/comms/status_codec.hpp"
 #include "slamd/mapping/mapper.hpp"
@@ -47,7 +47,8 @@ class CorpusWriter {
     char name[32];
     std::snprintf(name, sizeof(name), "seed-%03d", counts_[target]++);
     std::ofstream(folder / name, std::ios::binary)
-        .write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
+        .write(reinterpret_cast<const char*>(bytes.data()),
+               static_cast<std::streamsize>(bytes.size()));
   }
   void add(const std::string& target, std::uint8_t selector, const Bytes& bytes) {
     Bytes with_selector{selector};
@@ -70,7 +71,8 @@ RgbdFrame smallFrame(int width, int height) {
   std::unique_ptr<FrameSource> source = createSyntheticSource("room", config);
   source->open();
   FrameRead read;
-  while ((read = source->next(std::chrono::milliseconds(5000))).status != FrameRead::Status::kFrame) {
+  while ((read = source->next(std::chrono::milliseconds(5000))).status !=
+         FrameRead::Status::kFrame) {
     if (read.status == FrameRead::Status::kEndOfStream) throw std::runtime_error("no frame");
   }
   const RgbdFrame& full = *read.frame;
@@ -174,9 +176,8 @@ void poseAndStatusSeeds(CorpusWriter& corpus) {
   StatusExtras extras;
   extras.message = "tracking";
   builder.build(pose.utime, 1'000'000'000, stages, {}, extras);
-  const slamd::status_t status =
-      builder.build(pose.utime + 1000000, 2'000'000'000, stages, std::vector<std::uint64_t>(8, 2),
-                    extras);
+  const slamd::status_t status = builder.build(pose.utime + 1000000, 2'000'000'000, stages,
+                                               std::vector<std::uint64_t>(8, 2), extras);
   corpus.add("lcm_messages", encodeMessage(status));
   if (!status.stages.empty()) corpus.add("lcm_messages", encodeMessage(status.stages.front()));
 }
@@ -186,11 +187,16 @@ void commandSeeds(CorpusWriter& corpus) {
   // reference (the sanitizer builds fail to link otherwise).
   using C = slamd::command_t;
   const std::vector<std::pair<std::int8_t, std::string>> commands = {
-      {std::int8_t{C::SAVE_MAP}, ""},          {std::int8_t{C::SAVE_MAP}, "map.bt"},
-      {std::int8_t{C::SAVE_MAP}, "office.ot"}, {std::int8_t{C::SAVE_MAP}, "/tmp/x/map.bt"},
-      {std::int8_t{C::SAVE_MAP}, "../map.bt"}, {std::int8_t{C::PAUSE}, ""},
-      {std::int8_t{C::RESUME}, ""},            {std::int8_t{C::RESET}, ""},
-      {std::int8_t{C::SHUTDOWN}, ""},          {std::int8_t{C::PUBLISH_MAP}, ""}};
+      {std::int8_t{C::SAVE_MAP}, ""},
+      {std::int8_t{C::SAVE_MAP}, "map.bt"},
+      {std::int8_t{C::SAVE_MAP}, "office.ot"},
+      {std::int8_t{C::SAVE_MAP}, "/tmp/x/map.bt"},
+      {std::int8_t{C::SAVE_MAP}, "../map.bt"},
+      {std::int8_t{C::PAUSE}, ""},
+      {std::int8_t{C::RESUME}, ""},
+      {std::int8_t{C::RESET}, ""},
+      {std::int8_t{C::SHUTDOWN}, ""},
+      {std::int8_t{C::PUBLISH_MAP}, ""}};
   for (const auto& [code, argument] : commands) {
     slamd::command_t command;
     command.utime = 1;

@@ -56,14 +56,13 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     std::string error;
     resolveCommandSavePath(command.argument, save_dir, error);
   });
-  decodeAs<slamd::pose_t>(data, size, [](const slamd::pose_t& message) { fromPoseMessage(message); });
-  decodeAs<slamd::keyframe_trajectory_t>(data, size,
-                                         [](const slamd::keyframe_trajectory_t& message) {
-                                           fromKeyframeTrajectoryMessage(message);
-                                         });
-  decodeAs<slamd::status_t>(data, size, [](const slamd::status_t& message) {
-    renderStatusTable(message, 1);
-  });
+  decodeAs<slamd::pose_t>(data, size,
+                          [](const slamd::pose_t& message) { fromPoseMessage(message); });
+  decodeAs<slamd::keyframe_trajectory_t>(
+      data, size,
+      [](const slamd::keyframe_trajectory_t& message) { fromKeyframeTrajectoryMessage(message); });
+  decodeAs<slamd::status_t>(data, size,
+                            [](const slamd::status_t& message) { renderStatusTable(message, 1); });
   decodeAs<slamd::voxel_map_update_t>(data, size, [](const slamd::voxel_map_update_t& message) {
     if (auto update = fromMapUpdateMessage(message)) {
       MapReplica replica;

@@ -50,9 +50,9 @@ struct BoxRoom {
         int face = 0;
         const double t = hit(o, d, &face);
         frame.depth_m.at<float>(v, u) = static_cast<float>(t);
-        frame.color_bgr.at<cv::Vec3b>(v, u) =
-            cv::Vec3b(static_cast<unsigned char>(40 * face), static_cast<unsigned char>(200 - 30 * face),
-                      static_cast<unsigned char>(100 + 20 * face));
+        frame.color_bgr.at<cv::Vec3b>(v, u) = cv::Vec3b(
+            static_cast<unsigned char>(40 * face), static_cast<unsigned char>(200 - 30 * face),
+            static_cast<unsigned char>(100 + 20 * face));
       }
     }
     return frame;

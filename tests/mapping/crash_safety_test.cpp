@@ -6,7 +6,6 @@
 // saved is ever lost or torn. A temporary file left by the kill is removed by the start-up
 // cleanup, as the daemon does.
 
-#include <gtest/gtest.h>
 #include <fcntl.h>
 #include <signal.h>
 #include <sys/wait.h>
@@ -21,10 +20,12 @@
 #include <thread>
 #include <vector>
 
+#include <gtest/gtest.h>
+
 #include "box_room.hpp"
+#include "scoped_temp_dir.hpp"
 #include "slamd/common/file_io.hpp"
 #include "slamd/mapping/mapper.hpp"
-#include "scoped_temp_dir.hpp"
 #include "test_data.hpp"
 
 namespace slamd {
@@ -172,8 +173,8 @@ TEST(MapSaveCrashSafety, KillNineAtRandomMomentsNeverLosesOrTearsASavedMap) {
       }
     }
     // The start-up cleanup removes a temporary file the kill left.
-    const auto removed = removeStaleTemporaryFiles(
-        {(dir / "snapshot.ot").string(), (dir / "map.bt").string()});
+    const auto removed =
+        removeStaleTemporaryFiles({(dir / "snapshot.ot").string(), (dir / "map.bt").string()});
     torn_temporaries += static_cast<int>(removed.size());
     for (const auto& entry : fs::directory_iterator(dir)) {
       EXPECT_NE(entry.path().extension(), ".tmp") << entry.path() << " left after the cleanup";
@@ -181,9 +182,10 @@ TEST(MapSaveCrashSafety, KillNineAtRandomMomentsNeverLosesOrTearsASavedMap) {
   }
   // The kills must really land during saves for the test to mean something.
   EXPECT_GE(torn_temporaries, kTrials / 4);
-  std::printf("%d kill -9 trials: %d killed mid-write (temporary file left and removed), %d just "
-              "after a rename, 0 saved maps lost or torn\n",
-              kTrials, torn_temporaries, newer_than_reported);
+  std::printf(
+      "%d kill -9 trials: %d killed mid-write (temporary file left and removed), %d just "
+      "after a rename, 0 saved maps lost or torn\n",
+      kTrials, torn_temporaries, newer_than_reported);
 }
 
 }  // namespace

@@ -1,15 +1,15 @@
-#include <gtest/gtest.h>
+#include "slamd/mapping/mapper.hpp"
 
 #include <cmath>
 #include <limits>
 #include <random>
 
+#include <gtest/gtest.h>
 #include <opencv2/imgcodecs.hpp>
 
 #include "box_room.hpp"
-#include "slamd/mapping/map_io.hpp"
-#include "slamd/mapping/mapper.hpp"
 #include "scoped_temp_dir.hpp"
+#include "slamd/mapping/map_io.hpp"
 #include "test_data.hpp"
 
 namespace slamd {
@@ -114,9 +114,11 @@ TEST(Mapper, InvalidDepthNeverReachesTheOcTree) {
   dirty.depth_m = clean.depth_m.clone();
   // Every other column invalid in one of five ways; the valid columns are untouched.
   const float bad[] = {std::numeric_limits<float>::quiet_NaN(), 0.0f, -1.0f,
-                       std::numeric_limits<float>::infinity(), -std::numeric_limits<float>::infinity()};
+                       std::numeric_limits<float>::infinity(),
+                       -std::numeric_limits<float>::infinity()};
   for (int v = 0; v < dirty.depth_m.rows; ++v) {
-    for (int u = 1; u < dirty.depth_m.cols; u += 2) dirty.depth_m.at<float>(v, u) = bad[(u / 2 + v) % 5];
+    for (int u = 1; u < dirty.depth_m.cols; u += 2)
+      dirty.depth_m.at<float>(v, u) = bad[(u / 2 + v) % 5];
   }
   RgbdFrame only_valid = clean;
   only_valid.depth_m = dirty.depth_m.clone();
@@ -247,7 +249,8 @@ TEST(Mapper, RebuildAtCorrectedPosesEqualsMappingAtThosePoses) {
     const RgbdFrame frame = room.render(truth[i]);
     SE3 drifted = truth[i];
     drifted.translation() += Eigen::Vector3d(0.03 * static_cast<double>(i), 0.0, 0.02);
-    ASSERT_TRUE(corrected.integrate(frame, drifted, static_cast<std::int64_t>(i)).keyframe_cloud_kept);
+    ASSERT_TRUE(
+        corrected.integrate(frame, drifted, static_cast<std::int64_t>(i)).keyframe_cloud_kept);
     reference.integrate(frame, truth[i]);
     poses.emplace_back(static_cast<std::int64_t>(i), truth[i]);
   }
@@ -336,8 +339,8 @@ TEST(Mapper, PlyExportsHoldEveryOccupiedVoxelWithColour) {
   }
   // Voxel colours come from the rendered walls, not the white default.
   EXPECT_NE(occupied.colors_bgr[0], (ColorBgr{255, 255, 255}));
-  const MapFileResult clouds = mapper.exportKeyframeCloudPly((dir / "kf.ply").string(), 0.05,
-                                                             PlyFormat::kBinary);
+  const MapFileResult clouds =
+      mapper.exportKeyframeCloudPly((dir / "kf.ply").string(), 0.05, PlyFormat::kBinary);
   ASSERT_TRUE(clouds.ok) << clouds.error;
   PointCloud kf;
   ASSERT_TRUE(readPly((dir / "kf.ply").string(), kf));

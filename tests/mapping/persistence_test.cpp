@@ -1,4 +1,3 @@
-#include <gtest/gtest.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -6,10 +5,12 @@
 #include <filesystem>
 #include <fstream>
 
+#include <gtest/gtest.h>
+
 #include "box_room.hpp"
+#include "scoped_temp_dir.hpp"
 #include "slamd/mapping/map_io.hpp"
 #include "slamd/mapping/mapper.hpp"
-#include "scoped_temp_dir.hpp"
 #include "test_data.hpp"
 
 namespace slamd {
@@ -86,7 +87,8 @@ TEST(MapPersistence, SavedOtKeepsEveryLogOddsAndLoadsToContinueMapping) {
   const MapFileResult saved = mapper.saveMaps((dir / "room").string());
   ASSERT_TRUE(saved.ok) << saved.error;
   ASSERT_TRUE(fs::exists(dir / "room.bt"));
-  std::unique_ptr<octomap::AbstractOcTree> any(octomap::AbstractOcTree::read((dir / "room.ot").string()));
+  std::unique_ptr<octomap::AbstractOcTree> any(
+      octomap::AbstractOcTree::read((dir / "room.ot").string()));
   auto* back = dynamic_cast<octomap::OcTree*>(any.get());
   ASSERT_NE(back, nullptr);
   const octomap::OcTree& tree = *mapper.ocTree();
@@ -107,7 +109,9 @@ TEST(MapPersistence, SavedOtKeepsEveryLogOddsAndLoadsToContinueMapping) {
   mapSomeRoom(straight, 12);
   const test::BoxRoom room;
   const auto poses = test::lookAroundPoses(8);
-  for (int i = 6; i < 12; ++i) resumed.integrate(room.render(poses[static_cast<std::size_t>(i)]), poses[static_cast<std::size_t>(i)]);
+  for (int i = 6; i < 12; ++i)
+    resumed.integrate(room.render(poses[static_cast<std::size_t>(i)]),
+                      poses[static_cast<std::size_t>(i)]);
   EXPECT_TRUE(voxelStates(*resumed.ocTree()) == voxelStates(*straight.ocTree()));
 
   MappingConfig missing = quietConfig();
@@ -150,9 +154,8 @@ TEST(MapPersistence, AWriteThatFailsLeavesThePreviousFileIntact) {
       },
       &error));
   EXPECT_FALSE(error.empty());
-  EXPECT_FALSE(writeFileAtomically(path, [](std::ostream&) -> bool {
-    throw std::runtime_error("disk on fire");
-  }));
+  EXPECT_FALSE(writeFileAtomically(
+      path, [](std::ostream&) -> bool { throw std::runtime_error("disk on fire"); }));
   std::ifstream in(path);
   std::string line;
   std::getline(in, line);

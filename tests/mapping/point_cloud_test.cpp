@@ -1,4 +1,4 @@
-#include <gtest/gtest.h>
+#include "slamd/mapping/point_cloud.hpp"
 
 #include <cmath>
 #include <limits>
@@ -6,8 +6,9 @@
 #include <set>
 #include <tuple>
 
+#include <gtest/gtest.h>
+
 #include "slamd/mapping/mapping_config.hpp"
-#include "slamd/mapping/point_cloud.hpp"
 
 namespace slamd {
 namespace {
@@ -40,10 +41,10 @@ TEST(MappingConfig, DefaultsMatchTheIssue) {
 }
 
 TEST(MappingConfig, RejectsOutOfRangeAndInconsistentValues) {
-  for (const char* bad : {"mapping.resolution_m=0", "mapping.prob_hit=0.3",
-                          "mapping.voxel_filter_mode=median", "mapping.pixel_stride=0",
-                          "mapping.projection.min_height_m=2", "mapping.max_depth_m=0.05",
-                          "mapping.occupancy_threshold=0.98", "mapping.insertion=fast"}) {
+  for (const char* bad :
+       {"mapping.resolution_m=0", "mapping.prob_hit=0.3", "mapping.voxel_filter_mode=median",
+        "mapping.pixel_stride=0", "mapping.projection.min_height_m=2", "mapping.max_depth_m=0.05",
+        "mapping.occupancy_threshold=0.98", "mapping.insertion=fast"}) {
     Config config;
     config.applyOverride(bad);
     EXPECT_THROW(MappingConfig::load(config), ConfigError) << bad;
@@ -98,9 +99,9 @@ TEST(DepthToCloud, RejectsWrongTypesSizesAndIntrinsics) {
             DepthCloudStatus::kSizeMismatch);
   CameraIntrinsics bad = tinyCamera(4, 2);
   bad.fx = std::nan("");
-  EXPECT_EQ(depthToCloud(cv::Mat(2, 4, CV_32FC1, cv::Scalar(1.0)), cv::Mat(), bad, options, cloud,
-                         stats),
-            DepthCloudStatus::kBadIntrinsics);
+  EXPECT_EQ(
+      depthToCloud(cv::Mat(2, 4, CV_32FC1, cv::Scalar(1.0)), cv::Mat(), bad, options, cloud, stats),
+      DepthCloudStatus::kBadIntrinsics);
   EXPECT_TRUE(cloud.empty());
 }
 
@@ -134,7 +135,8 @@ TEST(VoxelGridFilter, KeepsOnePointPerCubeNearestToItsCentre) {
   std::mt19937 rng(42);
   std::uniform_real_distribution<float> coord(-1.0f, 1.0f);
   PointCloud input;
-  for (int i = 0; i < 20000; ++i) input.points.emplace_back(coord(rng), coord(rng), coord(rng) + 2.0f);
+  for (int i = 0; i < 20000; ++i)
+    input.points.emplace_back(coord(rng), coord(rng), coord(rng) + 2.0f);
   const double voxel = 0.2;
   VoxelGridFilter filter;
   PointCloud output;

@@ -1,8 +1,9 @@
-#include <gtest/gtest.h>
+#include "slamd/pipeline/drop_oldest_queue.hpp"
 
 #include <thread>
 
-#include "slamd/pipeline/drop_oldest_queue.hpp"
+#include <gtest/gtest.h>
+
 #include "test_helpers.hpp"
 
 namespace slamd {

@@ -1,4 +1,4 @@
-#include <gtest/gtest.h>
+#include "slamd/pipeline/pipeline.hpp"
 
 #include <atomic>
 #include <chrono>
@@ -7,8 +7,9 @@
 #include <numeric>
 #include <thread>
 
+#include <gtest/gtest.h>
+
 #include "slamd/common/log.hpp"
-#include "slamd/pipeline/pipeline.hpp"
 #include "test_helpers.hpp"
 
 namespace slamd {
@@ -41,7 +42,8 @@ struct Features {
 std::optional<Features> extract(Image image) {
   double energy = 0.0;
   for (std::size_t i = 1; i + 1 < image.pixels.size(); ++i) {
-    const double smoothed = 0.25 * image.pixels[i - 1] + 0.5 * image.pixels[i] + 0.25 * image.pixels[i + 1];
+    const double smoothed =
+        0.25 * image.pixels[i - 1] + 0.5 * image.pixels[i] + 0.25 * image.pixels[i + 1];
     energy += smoothed * smoothed;
   }
   return Features{image.id, energy};
@@ -107,15 +109,17 @@ TEST_F(PipelineTest, BackpressureKeepsOrderAndDeliversEverything) {
 }
 
 TEST_F(PipelineTest, SequentialAndThreadedModesGiveIdenticalOutputs) {
-  const auto sequential = runThreeStage(PipelineMode::kSequential, 500,
-                                        {2, EdgePolicy::kBackpressure}, {2, EdgePolicy::kBackpressure});
+  const auto sequential =
+      runThreeStage(PipelineMode::kSequential, 500, {2, EdgePolicy::kBackpressure},
+                    {2, EdgePolicy::kBackpressure});
   const auto threaded = runThreeStage(PipelineMode::kThreaded, 500, {2, EdgePolicy::kBackpressure},
                                       {2, EdgePolicy::kBackpressure});
   ASSERT_EQ(sequential.size(), 500u);
   EXPECT_EQ(sequential, threaded);
   // In sequential mode no policy ever drops: each item crosses the graph before the next starts.
-  const auto sequential_dropping = runThreeStage(
-      PipelineMode::kSequential, 500, {1, EdgePolicy::kDropOldest}, {1, EdgePolicy::kDrainToNewest});
+  const auto sequential_dropping =
+      runThreeStage(PipelineMode::kSequential, 500, {1, EdgePolicy::kDropOldest},
+                    {1, EdgePolicy::kDrainToNewest});
   EXPECT_EQ(sequential_dropping, sequential);
 }
 
@@ -177,7 +181,8 @@ TEST_F(PipelineTest, DrainToNewestSkipsToTheNewestAndCountsExactly) {
 TEST_F(PipelineTest, DropPoliciesUnderFreeRunningLoadAccountForEveryItem) {
   for (EdgePolicy policy : {EdgePolicy::kDropOldest, EdgePolicy::kDrainToNewest}) {
     std::vector<StageStats> stats;
-    const auto results = runThreeStage(PipelineMode::kThreaded, 3000, {2, policy}, {1, policy}, &stats);
+    const auto results =
+        runThreeStage(PipelineMode::kThreaded, 3000, {2, policy}, {1, policy}, &stats);
     const EdgeStats first = stats[1].inputs[0];
     const EdgeStats second = stats[2].inputs[0];
     EXPECT_EQ(first.pushed, 3000u);
@@ -289,17 +294,18 @@ TEST_F(PipelineTest, HeartbeatsPassThroughButAreNeitherCountedNorTimedAsWork) {
     return SourceStep<MaybeWork>::of(work ? MaybeWork{static_cast<std::uint64_t>(step)}
                                           : MaybeWork{});
   });
-  auto worked = pipeline.addStage<MaybeWork, MaybeWork>(
-      "work", items, {64, EdgePolicy::kBackpressure},
-      [](MaybeWork item) -> std::optional<MaybeWork> {
-        // Simulated work of 2 ms per real item (not synchronisation).
-        if (!item.isHeartbeat()) std::this_thread::sleep_for(2ms);
-        return item;
-      });
-  pipeline.addSink<MaybeWork>("sink", worked, {64, EdgePolicy::kBackpressure},
-                              [&](MaybeWork item) {
-                                if (item.isHeartbeat()) heartbeats_seen.fetch_add(1);
-                              });
+  auto worked =
+      pipeline.addStage<MaybeWork, MaybeWork>("work", items, {64, EdgePolicy::kBackpressure},
+                                              [](MaybeWork item) -> std::optional<MaybeWork> {
+                                                // Simulated work of 2 ms per real item (not
+                                                // synchronisation).
+                                                if (!item.isHeartbeat())
+                                                  std::this_thread::sleep_for(2ms);
+                                                return item;
+                                              });
+  pipeline.addSink<MaybeWork>("sink", worked, {64, EdgePolicy::kBackpressure}, [&](MaybeWork item) {
+    if (item.isHeartbeat()) heartbeats_seen.fetch_add(1);
+  });
   pipeline.start();
   ASSERT_TRUE(pipeline.waitUntilFinished(std::chrono::steady_clock::now() + 30s));
   pipeline.stop(1s);
@@ -346,7 +352,8 @@ TEST_F(PipelineTest, DestructorStopsARunningPipeline) {
   {
     Pipeline pipeline(PipelineMode::kThreaded);
     auto ids = pipeline.addSource<int>("source", [] { return SourceStep<int>::of(1); });
-    pipeline.addSink<int>("sink", ids, {4, EdgePolicy::kDropOldest}, [&](int) { sunk.fetch_add(1); });
+    pipeline.addSink<int>("sink", ids, {4, EdgePolicy::kDropOldest},
+                          [&](int) { sunk.fetch_add(1); });
     pipeline.start();
     while (sunk.load() < 10) std::this_thread::yield();
   }

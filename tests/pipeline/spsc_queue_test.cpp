@@ -1,9 +1,10 @@
-#include <gtest/gtest.h>
+#include "slamd/pipeline/spsc_queue.hpp"
 
 #include <memory>
 #include <thread>
 
-#include "slamd/pipeline/spsc_queue.hpp"
+#include <gtest/gtest.h>
+
 #include "test_helpers.hpp"
 
 namespace slamd {
@@ -51,9 +52,7 @@ TEST(SpscQueue, CarriesMoveOnlyPayloads) {
   EXPECT_EQ(**item, 7);
 }
 
-TEST(SpscQueue, ZeroCapacityIsRejected) {
-  EXPECT_THROW(SpscQueue<int>(0), std::invalid_argument);
-}
+TEST(SpscQueue, ZeroCapacityIsRejected) { EXPECT_THROW(SpscQueue<int>(0), std::invalid_argument); }
 
 TEST(SpscQueue, NeitherLeaksNorDestroysTwice) {
   const auto alive_before = LifetimeCounter::alive.load();
@@ -136,8 +135,10 @@ TEST(SpscQueue, TwoThreadsWithLifetimeCountedItemsLeakNothing) {
     });
     std::uint64_t sum = 0;
     while (!queue.drained()) {
-      if (auto item = queue.tryPop()) sum += item->value;
-      else std::this_thread::yield();
+      if (auto item = queue.tryPop())
+        sum += item->value;
+      else
+        std::this_thread::yield();
     }
     producer.join();
     EXPECT_EQ(sum, kItems * (kItems - 1) / 2);

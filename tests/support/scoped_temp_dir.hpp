@@ -10,9 +10,9 @@
 
 #include <stdlib.h>  // mkdtemp
 
+#include <cerrno>
 #include <cstdio>
 #include <cstdlib>
-#include <cerrno>
 #include <cstring>
 #include <filesystem>
 #include <ostream>

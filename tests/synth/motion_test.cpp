@@ -1,8 +1,9 @@
-#include <gtest/gtest.h>
+#include "slamd/synth/motion.hpp"
 
 #include <cmath>
 
-#include "slamd/synth/motion.hpp"
+#include <gtest/gtest.h>
+
 #include "slamd/synth/renderer.hpp"
 #include "synth_test_support.hpp"
 
@@ -46,8 +47,7 @@ TEST_F(SceneMotions, EveryTrajectoryIsSmoothAtThirtyHertz) {
       double max_step_m = 0.0;
       double max_turn_rad = 0.0;
       for (std::size_t i = 1; i < trajectory.size(); ++i) {
-        const SE3 delta =
-            trajectory[i - 1].T_world_camera.inverse() * trajectory[i].T_world_camera;
+        const SE3 delta = trajectory[i - 1].T_world_camera.inverse() * trajectory[i].T_world_camera;
         max_step_m = std::max(max_step_m, delta.translation().norm());
         max_turn_rad = std::max(max_turn_rad, rotationAngleRad(delta.linear()));
       }
@@ -64,8 +64,8 @@ TEST_F(SceneMotions, TheZigzagWalksDownTheCorridorAtAboutPointEightMetresPerSeco
   const int frames = motion.naturalFrameCount();
   const Trajectory trajectory = sampleTrajectory(motion, frames, 0, 30.0);
   const double duration_s = (frames - 1) / 30.0;
-  const double advance_m =
-      trajectory.back().T_world_camera.translation().x() - trajectory.front().T_world_camera.translation().x();
+  const double advance_m = trajectory.back().T_world_camera.translation().x() -
+                           trajectory.front().T_world_camera.translation().x();
   EXPECT_NEAR(advance_m / duration_s, 0.8, 0.05);
   EXPECT_GT(advance_m, 25.0);  // most of the 30 m corridor
   double min_y = 1.0;
@@ -81,7 +81,8 @@ TEST_F(SceneMotions, TheLoopReturnsToItsStart) {
   for (const Scene& scene : scenes_) {
     CameraMotion motion(scene, MotionKind::kLoop, MotionParams(), 42);
     const Trajectory trajectory = sampleTrajectory(motion, motion.naturalFrameCount(), 0, 30.0);
-    const SE3 delta = trajectory.front().T_world_camera.inverse() * trajectory.back().T_world_camera;
+    const SE3 delta =
+        trajectory.front().T_world_camera.inverse() * trajectory.back().T_world_camera;
     EXPECT_LT(delta.translation().norm(), 0.06) << scene.name;
     EXPECT_LT(rotationAngleRad(delta.linear()), 0.08) << scene.name;
   }

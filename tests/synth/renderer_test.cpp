@@ -1,10 +1,11 @@
-#include <gtest/gtest.h>
+#include "slamd/synth/renderer.hpp"
 
 #include <cmath>
 #include <random>
 
+#include <gtest/gtest.h>
+
 #include "slamd/synth/motion.hpp"
-#include "slamd/synth/renderer.hpp"
 #include "synth_test_support.hpp"
 
 namespace slamd::synth {
@@ -67,8 +68,8 @@ TEST(Renderer, RenderMatchesBruteForceRayCastingInEveryScene) {
         const int u = col(rng);
         const int v = row(rng);
         int id = -1;
-        const double z = test::bruteForceRayCast(source->scene(), T.translation(),
-                                                 T.linear() * k.ray(u, v), id);
+        const double z =
+            test::bruteForceRayCast(source->scene(), T.translation(), T.linear() * k.ray(u, v), id);
         const double depth = out.depth_m.at<float>(v, u);
         ++checked;
         if (!std::isfinite(z)) {

@@ -1,9 +1,9 @@
-#include <gtest/gtest.h>
+#include "slamd/synth/sensor_model.hpp"
 
 #include <cmath>
 #include <limits>
 
-#include "slamd/synth/sensor_model.hpp"
+#include <gtest/gtest.h>
 
 namespace slamd::synth {
 namespace {

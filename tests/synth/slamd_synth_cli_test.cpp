@@ -1,5 +1,3 @@
-#include <gtest/gtest.h>
-
 #include <sys/wait.h>
 
 #include <cstdlib>
@@ -7,8 +5,10 @@
 #include <fstream>
 #include <string>
 
-#include "slamd/common/trajectory.hpp"
+#include <gtest/gtest.h>
+
 #include "scoped_temp_dir.hpp"
+#include "slamd/common/trajectory.hpp"
 #include "test_data.hpp"
 
 namespace slamd {

@@ -1,13 +1,14 @@
-#include <gtest/gtest.h>
+#include "slamd/synth/synthetic_source.hpp"
 
 #include <cstring>
 #include <filesystem>
 
+#include <gtest/gtest.h>
+
+#include "scoped_temp_dir.hpp"
 #include "slamd/capture/tum_source.hpp"
-#include "slamd/synth/synthetic_source.hpp"
 #include "slamd/synth/tum_writer.hpp"
 #include "synth_test_support.hpp"
-#include "scoped_temp_dir.hpp"
 #include "test_data.hpp"
 
 namespace slamd {
@@ -116,8 +117,9 @@ TEST(SyntheticSource, MotionBlurIsCentredOnTheFrameTimestamp) {
   // ended at the timestamp (frames 28..30) would sit much closer to frame 29.
   const auto sharp = test::makeSyntheticSource("corridor", {"synthetic.sensor.color_noise_std=0"});
   const auto blurred = test::makeSyntheticSource(
-      "corridor", {"synthetic.sensor.color_noise_std=0", "synthetic.sensor.motion_blur=true",
-                   "synthetic.sensor.exposure_time_s=0.0666667", "synthetic.sensor.blur_samples=9"});
+      "corridor",
+      {"synthetic.sensor.color_noise_std=0", "synthetic.sensor.motion_blur=true",
+       "synthetic.sensor.exposure_time_s=0.0666667", "synthetic.sensor.blur_samples=9"});
   const RgbdFramePtr before = sharp->renderFrame(29);
   const RgbdFramePtr after = sharp->renderFrame(31);
   const RgbdFramePtr frame = blurred->renderFrame(30);
@@ -169,7 +171,8 @@ TEST(SyntheticSource, AWrittenSequenceReadBackByTheTumSourceGivesIdenticalFrames
     EXPECT_EQ(read.frame->utime, written[i]->utime);
     EXPECT_TRUE(sameBytes(read.frame->color_bgr, written[i]->color_bgr)) << "frame " << i;
     // Depth is exact at the file's 1/5000 m quantisation (NaN where nothing was measured).
-    const cv::Mat expected = depthRawToMeters(depthMetersToRaw(written[i]->depth_m, 5000.0), 5000.0);
+    const cv::Mat expected =
+        depthRawToMeters(depthMetersToRaw(written[i]->depth_m, 5000.0), 5000.0);
     EXPECT_TRUE(sameBytes(read.frame->depth_m, expected)) << "frame " << i;
     const double worst_error_m = [&] {
       double worst = 0.0;
@@ -190,7 +193,8 @@ TEST(SyntheticSource, AWrittenSequenceReadBackByTheTumSourceGivesIdenticalFrames
   ASSERT_EQ(read_gt.size(), gt.size());
   for (std::size_t i = 0; i < gt.size(); ++i) {
     EXPECT_EQ(secondsToUtime(read_gt[i].timestamp_s), secondsToUtime(gt[i].timestamp_s));
-    EXPECT_LT((read_gt[i].T_world_camera.translation() - gt[i].T_world_camera.translation()).norm(), 2e-9);
+    EXPECT_LT((read_gt[i].T_world_camera.translation() - gt[i].T_world_camera.translation()).norm(),
+              2e-9);
     EXPECT_LT(rotationAngleRad(read_gt[i].T_world_camera.linear().transpose() *
                                gt[i].T_world_camera.linear()),
               1e-8);

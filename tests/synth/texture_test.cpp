@@ -1,8 +1,8 @@
-#include <gtest/gtest.h>
+#include "slamd/synth/texture.hpp"
 
+#include <gtest/gtest.h>
 #include <opencv2/features2d.hpp>
 
-#include "slamd/synth/texture.hpp"
 #include "synth_test_support.hpp"
 
 namespace slamd::synth {

@@ -1,10 +1,10 @@
+#include "slamd/tracking/features.hpp"
+
 #include <cmath>
 #include <limits>
 
 #include <gtest/gtest.h>
 #include <opencv2/core.hpp>
-
-#include "slamd/tracking/features.hpp"
 
 namespace slamd {
 namespace {
@@ -34,7 +34,8 @@ TrackingConfig wideDepthRange() {
 TEST(DepthAtPixel, IsExactOnASlantedPlaneBetweenPixels) {
   const cv::Mat depth = slantedPlaneDepth();
   const TrackingConfig config = wideDepthRange();
-  for (const auto& [u, v] : {std::pair{40.5, 30.5}, std::pair{80.25, 61.75}, std::pair{120.9, 90.1}}) {
+  for (const auto& [u, v] :
+       {std::pair{40.5, 30.5}, std::pair{80.25, 61.75}, std::pair{120.9, 90.1}}) {
     const double expected = 1.0 / planeInverseDepth(u, v);
     // Interpolating z itself is off by about 0.3 mm at these points; 1/z is exact (float storage).
     EXPECT_NEAR(depthAtPixel(depth, u, v, config), expected, 2e-6 * expected) << u << ", " << v;
@@ -54,7 +55,8 @@ TEST(InverseDepthGradient, GivesThePlaneSlopeAndZeroAcrossADepthEdge) {
   depth.at<float>(70, 60) = std::numeric_limits<float>::quiet_NaN();
   EXPECT_EQ(inverseDepthGradient(depth, 60.0, 68.0, depth.at<float>(68, 60)),
             Eigen::Vector2d::Zero());
-  EXPECT_EQ(inverseDepthGradient(depth, 1.0, 50.0, depth.at<float>(50, 1)), Eigen::Vector2d::Zero());
+  EXPECT_EQ(inverseDepthGradient(depth, 1.0, 50.0, depth.at<float>(50, 1)),
+            Eigen::Vector2d::Zero());
   EXPECT_EQ(inverseDepthGradient(depth, 60.0, 50.0, 0.0), Eigen::Vector2d::Zero());
   EXPECT_EQ(inverseDepthGradient(cv::Mat(), 60.0, 50.0, 2.0), Eigen::Vector2d::Zero());
 }

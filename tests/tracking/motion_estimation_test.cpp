@@ -1,8 +1,8 @@
+#include "slamd/tracking/motion_estimation.hpp"
+
 #include <random>
 
 #include <gtest/gtest.h>
-
-#include "slamd/tracking/motion_estimation.hpp"
 
 namespace slamd {
 namespace {

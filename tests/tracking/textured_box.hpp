@@ -71,8 +71,8 @@ class TexturedBox {
         const int a2 = (axis + 2) % 3;
         const double tu = (p(a1) - min_(a1)) * texels_per_m_;
         const double tv = (p(a2) - min_(a2)) * texels_per_m_;
-        frame.gray.at<std::uint8_t>(v, u) =
-            cv::saturate_cast<std::uint8_t>(sample(textures_[static_cast<std::size_t>(axis * 2 + side)], tu, tv));
+        frame.gray.at<std::uint8_t>(v, u) = cv::saturate_cast<std::uint8_t>(
+            sample(textures_[static_cast<std::size_t>(axis * 2 + side)], tu, tv));
         frame.depth_m.at<float>(v, u) = static_cast<float>(t_hit);
       }
     }

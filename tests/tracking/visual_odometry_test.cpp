@@ -1,3 +1,5 @@
+#include "slamd/tracking/visual_odometry.hpp"
+
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -5,7 +7,6 @@
 
 #include <gtest/gtest.h>
 
-#include "slamd/tracking/visual_odometry.hpp"
 #include "textured_box.hpp"
 
 namespace slamd {
@@ -101,12 +102,15 @@ SequenceErrors runSynthetic(FrontEndType frontend, int frames) {
     if (r.status != OdometryStatus::kOk) ++e.failures;
     if (r.is_keyframe) ++e.keyframes;
     // World = first camera = identity here, so errors are direct.
-    e.max_translation_m = std::max(e.max_translation_m, (r.T_world_camera.translation() - T_true.translation()).norm());
+    e.max_translation_m = std::max(e.max_translation_m,
+                                   (r.T_world_camera.translation() - T_true.translation()).norm());
     e.max_rotation_deg = std::max(e.max_rotation_deg, rotationErrorDeg(r.T_world_camera, T_true));
     if (i > 0) {
       const SE3 step_true = prev_true.inverse() * T_true;
-      e.max_step_translation_m = std::max(e.max_step_translation_m, (r.T_prev_curr.translation() - step_true.translation()).norm());
-      e.max_step_rotation_deg = std::max(e.max_step_rotation_deg, rotationErrorDeg(r.T_prev_curr, step_true));
+      e.max_step_translation_m = std::max(
+          e.max_step_translation_m, (r.T_prev_curr.translation() - step_true.translation()).norm());
+      e.max_step_rotation_deg =
+          std::max(e.max_step_rotation_deg, rotationErrorDeg(r.T_prev_curr, step_true));
       if (std::getenv("SLAMD_TRACKING_DEBUG")) {
         std::fprintf(stderr, "%d kf=%d ref=%ld in=%d/%d rms=%.3f step_err=%.5f m %.4f deg\n", i,
                      r.is_keyframe, static_cast<long>(r.reference_keyframe_id), r.stats.num_inliers,

@@ -96,8 +96,8 @@ int main(int argc, char** argv) {
     offset_s = numberOption(options, "offset", config.getDouble("eval.offset_s", 0.0, -1e9, 1e9));
     scale = numberOption(options, "scale", config.getDouble("eval.scale", 1.0, 1e-9, 1e9));
     delta = numberOption(options, "delta", config.getDouble("eval.delta", 1.0, 0.0, 1e12));
-    max_pairs = static_cast<int>(numberOption(
-        options, "max-pairs", config.getInt("eval.max_pairs", 0, 0, 100000000)));
+    max_pairs = static_cast<int>(
+        numberOption(options, "max-pairs", config.getInt("eval.max_pairs", 0, 0, 100000000)));
     alignment_text = options.has("align")
                          ? options.value("align")
                          : config.getChoice("eval.alignment", "se3", {"se3", "sim3", "none"});
@@ -132,7 +132,8 @@ int main(int argc, char** argv) {
       ate_options.association.offset_s = offset_s;
       ate_options.scale = scale;
       ate_options.alignment = slamd::eval::parseAlignmentModel(alignment_text);
-      const slamd::eval::AteResult ate = slamd::eval::computeAte(groundtruth, estimate, ate_options);
+      const slamd::eval::AteResult ate =
+          slamd::eval::computeAte(groundtruth, estimate, ate_options);
       const ErrorStatistics& s = ate.translation_m;
       if (json_output) {
         JsonWriter json(true);
@@ -178,7 +179,8 @@ int main(int argc, char** argv) {
       rpe_options.offset_s = offset_s;
       rpe_options.scale = scale;
       rpe_options.max_pairs = static_cast<std::size_t>(max_pairs);
-      const slamd::eval::RpeResult rpe = slamd::eval::computeRpe(groundtruth, estimate, rpe_options);
+      const slamd::eval::RpeResult rpe =
+          slamd::eval::computeRpe(groundtruth, estimate, rpe_options);
       if (json_output) {
         JsonWriter json(true);
         json.beginObject().key("metric").value("rpe");
@@ -201,8 +203,7 @@ int main(int argc, char** argv) {
       if (options.has("plot")) {
         plot_options.title = "Relative pose error over " + slamd::eval::JsonWriter::number(delta) +
                              " " + delta_unit_text;
-        slamd::eval::writePng(options.value("plot"),
-                              slamd::eval::renderRpePlot(rpe, plot_options));
+        slamd::eval::writePng(options.value("plot"), slamd::eval::renderRpePlot(rpe, plot_options));
       }
     }
   } catch (const std::invalid_argument& e) {
@@ -210,9 +211,9 @@ int main(int argc, char** argv) {
     return slamd::kExitUsage;
   } catch (const std::runtime_error& e) {
     std::cerr << "slamd-eval: " << e.what() << "\n";
-    return e.what() == std::string() ? slamd::kExitFailure
+    return e.what() == std::string()                                 ? slamd::kExitFailure
            : std::string(e.what()).find("plot") != std::string::npos ? slamd::kExitOutputError
-                                                                      : slamd::kExitFailure;
+                                                                     : slamd::kExitFailure;
   }
   return slamd::kExitOk;
 }

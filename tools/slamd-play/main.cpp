@@ -9,9 +9,10 @@
 #include <csignal>
 #include <cstdio>
 #include <iostream>
-#include <lcm/lcm-cpp.hpp>
 #include <memory>
 #include <sstream>
+
+#include <lcm/lcm-cpp.hpp>
 
 #include "slamd/common/log.hpp"
 #include "slamd/common/program_options.hpp"

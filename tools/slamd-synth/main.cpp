@@ -26,7 +26,8 @@ int main(int argc, char** argv) {
                          "Renders a synthetic RGB-D sequence with exact ground truth as a TUM "
                          "RGB-D folder.");
   options.addOption("scene", "SCENE", "corridor | corridor_loop | room", "corridor");
-  options.addOption("trajectory", "KIND", "auto | zigzag | random | robot | loop (auto: per scene)");
+  options.addOption("trajectory", "KIND",
+                    "auto | zigzag | random | robot | loop (auto: per scene)");
   options.addOption("frames", "N", "frame count (0 = the trajectory's natural length)");
   options.addOption("seed", "S", "seed of the scene, motion and sensor noise");
   options.addOption("out", "DIR", "output folder (created)");
@@ -79,10 +80,9 @@ int main(int argc, char** argv) {
     std::deque<std::future<RgbdFramePtr>> rendering;
     int next_index = 0;
     auto renderNext = [&] {
-      rendering.push_back(std::async(std::launch::async,
-                                     [&source, index = next_index] {
-                                       return source->renderFrame(index);
-                                     }));
+      rendering.push_back(std::async(std::launch::async, [&source, index = next_index] {
+        return source->renderFrame(index);
+      }));
       ++next_index;
     };
     while (static_cast<int>(rendering.size()) < threads && next_index < source->frameCount()) {

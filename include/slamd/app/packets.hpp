@@ -29,7 +29,7 @@ struct CapturePacket {
 
 /// tracking -> filter
 struct TrackedPacket {
-  RgbdFramePtr frame;                     ///< null: heartbeat
+  RgbdFramePtr frame;                      ///< null: heartbeat
   std::optional<OdometryResult> odometry;  ///< set for every frame
   /// The frame's vanishing point, detected on the vanishing-point thread in parallel with
   /// tracking; joined to the packet by the filter thread (empty when that thread is off or its

@@ -19,8 +19,8 @@ namespace slamd {
 
 /// Where the filter's vanishing points come from.
 enum class VanishingPointSource {
-  kDetectHere,      ///< process() runs the detector on the frame's grey image
-  kPrecomputed,     ///< only TrackedPacket::vanishing_point (the daemon's own thread) is used
+  kDetectHere,   ///< process() runs the detector on the frame's grey image
+  kPrecomputed,  ///< only TrackedPacket::vanishing_point (the daemon's own thread) is used
 };
 
 class PoseEstimator {

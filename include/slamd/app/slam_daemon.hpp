@@ -16,10 +16,10 @@
 // wires them in one table (stage, input, edge capacity and policy, thread niceness).
 //
 // Threads: one per stage, owned by the pipeline (the back end with backend.enabled; vanishing-point
-// detection with daemon.vanishing_point_thread and the filter on); the LCM bus has its own receive thread (commands
-// only: it pushes them into a queue); the calling thread runs the control loop (commands, 1 Hz
-// status) and, after the pipeline has stopped, writes outputs. RESET travels through the queues
-// with the frames, so every stage resets at the same point of the stream.
+// detection with daemon.vanishing_point_thread and the filter on); the LCM bus has its own receive
+// thread (commands only: it pushes them into a queue); the calling thread runs the control loop
+// (commands, 1 Hz status) and, after the pipeline has stopped, writes outputs. RESET travels
+// through the queues with the frames, so every stage resets at the same point of the stream.
 
 #include <functional>
 #include <memory>
@@ -34,10 +34,10 @@ class FrameSource;
 
 /// Command-line values that take precedence over the configuration file.
 struct DaemonOverrides {
-  std::string source;          ///< --source
-  std::string lcm_url;         ///< --lcm-url
-  std::string trajectory_out;  ///< --trajectory-out
-  std::string map_out;         ///< --map-out
+  std::string source;           ///< --source
+  std::string lcm_url;          ///< --lcm-url
+  std::string trajectory_out;   ///< --trajectory-out
+  std::string map_out;          ///< --map-out
   std::string groundtruth_out;  ///< --groundtruth-out
   std::string metrics_out;      ///< --metrics-out
   /// Wraps the source the configuration names (tests: fault injection such as a camera that
@@ -57,7 +57,7 @@ struct DaemonSummary {
   std::uint64_t poses_predicted = 0;
   std::uint64_t poses_lost = 0;
   std::uint64_t poses_not_initialized = 0;
-  double longest_loss_s = 0.0;      ///< longest run of predicted or lost poses, frame time
+  double longest_loss_s = 0.0;        ///< longest run of predicted or lost poses, frame time
   bool tracking_lost_at_end = false;  ///< the last published pose was not measured
   // Gaps in the camera's frames (more than 0.5 s of capture time between two poses: a camera
   // that stopped and came back) and the time from the first frame back to a measured pose.
@@ -67,7 +67,7 @@ struct DaemonSummary {
   bool resumed_after_last_gap = true;  ///< false: no pose was measured after the last gap
   // Why frames were dropped (each also counted in `drops`).
   std::uint64_t frames_behind_schedule = 0;  ///< passed over by a real-time source running late
-  std::uint64_t frames_over_rate = 0;  ///< received faster than a camera sends (lcm: sources)
+  std::uint64_t frames_over_rate = 0;        ///< received faster than a camera sends (lcm: sources)
   std::uint64_t frames_dropped_before_tracking = 0;  ///< tracking's input queue was full
   std::uint64_t drops = 0;
   std::uint64_t errors = 0;

@@ -63,7 +63,7 @@ class DaemonPublisher {
 
 /// One packet as a step saw it, for tests (see StepBase::setTrace).
 struct StepTraceEntry {
-  Utime utime = -1;              ///< the frame's capture time; -1 for a heartbeat
+  Utime utime = -1;               ///< the frame's capture time; -1 for a heartbeat
   std::uint64_t reset_epoch = 0;  ///< the packet's epoch
   std::uint64_t resets = 0;       ///< resets the step had done when it processed the packet
 };

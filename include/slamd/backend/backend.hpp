@@ -55,14 +55,14 @@ namespace slamd {
 
 struct BackendUpdate {
   std::int64_t keyframe_id = -1;
-  LoopDetection loop;               ///< the loop search for this keyframe
-  bool optimized = false;           ///< a loop was added and the graph re-optimised
-  PoseGraphResult optimization;     ///< valid when optimized
+  LoopDetection loop;            ///< the loop search for this keyframe
+  bool optimized = false;        ///< a loop was added and the graph re-optimised
+  PoseGraphResult optimization;  ///< valid when optimized
   /// The optimisation moved the whole graph (a loop or relocalisation that was far from closed),
   /// not only the local window around this keyframe.
   bool full_optimization = false;
-  int num_local_edges = 0;          ///< local (covisibility) edges added for this keyframe
-  int num_local_rejected = 0;       ///< verified local matches that disagreed with the graph
+  int num_local_edges = 0;     ///< local (covisibility) edges added for this keyframe
+  int num_local_rejected = 0;  ///< verified local matches that disagreed with the graph
   /// This keyframe's segment was joined to the map by a relocalisation now.
   bool relocalized = false;
   /// The relocalisation attempt of this keyframe (when attempted): match_id, inliers, status.

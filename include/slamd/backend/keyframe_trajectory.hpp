@@ -3,7 +3,8 @@
 // end. Each frame is stored as its odometry pose relative to its reference keyframe (the keyframe
 // tracking measured it against, else the latest keyframe of its segment); the corrected
 // trajectory composes the back end's corrected pose of that keyframe with the stored offset:
-//   T_world_frame = T_world_keyframe(corrected) * T_world_keyframe(odometry)^-1 * T_world_frame(odometry)
+//   T_world_frame = T_world_keyframe(corrected) * T_world_keyframe(odometry)^-1 *
+//   T_world_frame(odometry)
 //
 // Usage (one thread, no threads inside):
 //   KeyframeAnchoredTrajectory trajectory;

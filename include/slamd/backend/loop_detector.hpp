@@ -39,29 +39,29 @@
 namespace slamd {
 
 enum class LoopStatus : std::int8_t {
-  kLoopFound = 0,             ///< verified and consistent: add the edge
-  kNoCandidate = 1,           ///< nothing similar enough outside the recent keyframes
-  kGeometryRejected = 2,      ///< candidates failed RANSAC / refinement / minimum inliers
-  kAwaitingConsistency = 3,   ///< verified, but not yet confirmed by consecutive keyframes
-  kUnsupportedDescriptors = 4,///< not 256-bit binary descriptors, or no features
-  kOdometryRejected = 5,      ///< verified, but too far from the odometry (aliasing)
+  kLoopFound = 0,               ///< verified and consistent: add the edge
+  kNoCandidate = 1,             ///< nothing similar enough outside the recent keyframes
+  kGeometryRejected = 2,        ///< candidates failed RANSAC / refinement / minimum inliers
+  kAwaitingConsistency = 3,     ///< verified, but not yet confirmed by consecutive keyframes
+  kUnsupportedDescriptors = 4,  ///< not 256-bit binary descriptors, or no features
+  kOdometryRejected = 5,        ///< verified, but too far from the odometry (aliasing)
 };
 
 const char* loopStatusName(LoopStatus status);
 
 struct LoopDetection {
   LoopStatus status = LoopStatus::kNoCandidate;
-  std::int64_t query_id = -1;   ///< the keyframe processed (-1 for query())
-  std::int64_t match_id = -1;   ///< the earlier keyframe it was verified against
+  std::int64_t query_id = -1;           ///< the keyframe processed (-1 for query())
+  std::int64_t match_id = -1;           ///< the earlier keyframe it was verified against
   SE3 T_match_query = SE3::Identity();  ///< metres
   /// Information of the loop edge (inverse covariance from the refinement, with a floor of
   /// 1 cm / 0.5 degree standard deviation), order x y z rx ry rz.
   Matrix6d information = Matrix6d::Identity();
-  double score = 0.0;            ///< BoW similarity of the match, [0, 1]
-  int num_candidates = 0;        ///< candidates retrieved above the score threshold
-  int num_matches = 0;           ///< descriptor matches with the verified candidate
-  int num_inliers = 0;           ///< RANSAC inliers after refinement
-  int consistency = 0;           ///< consecutive keyframes agreeing on this place
+  double score = 0.0;      ///< BoW similarity of the match, [0, 1]
+  int num_candidates = 0;  ///< candidates retrieved above the score threshold
+  int num_matches = 0;     ///< descriptor matches with the verified candidate
+  int num_inliers = 0;     ///< RANSAC inliers after refinement
+  int consistency = 0;     ///< consecutive keyframes agreeing on this place
   double time_ms = 0.0;
 };
 
@@ -133,8 +133,8 @@ class LoopDetector {
   /// With a prior T_match_query, descriptors are matched near the predicted projections only
   /// (backend.local_search_radius_px); without, over all pairs.
   bool verify(const FeatureSet& query, const CameraIntrinsics& intrinsics, const Entry& e,
-              LoopDetection& detection, int min_inliers, double min_sigma_m,
-              double min_sigma_rad, const SE3* T_match_query_prior = nullptr);
+              LoopDetection& detection, int min_inliers, double min_sigma_m, double min_sigma_rad,
+              const SE3* T_match_query_prior = nullptr);
 
   BackendConfig config_;
   std::shared_ptr<const Vocabulary> vocabulary_;

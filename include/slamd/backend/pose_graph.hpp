@@ -38,8 +38,8 @@ enum class EdgeKind : std::int8_t {
 };
 
 struct PoseGraphEdge {
-  std::int64_t from_id = 0;  ///< node i
-  std::int64_t to_id = 0;    ///< node j
+  std::int64_t from_id = 0;         ///< node i
+  std::int64_t to_id = 0;           ///< node j
   SE3 T_from_to = SE3::Identity();  ///< measured Z_i_j (metres)
   /// Inverse covariance of the error, order x y z rx ry rz (1/m^2, 1/rad^2).
   Matrix6d information = Matrix6d::Identity();
@@ -47,10 +47,10 @@ struct PoseGraphEdge {
 };
 
 enum class OptimizationStatus : std::int8_t {
-  kConverged = 0,       ///< a tolerance was met
-  kMaxIterations = 1,   ///< stopped after max_iterations (the result is still the best found)
-  kSolverFailure = 2,   ///< CHOLMOD could not factorise even with large damping
-  kInvalidGraph = 3,    ///< an edge names a missing node, or nothing to optimise
+  kConverged = 0,      ///< a tolerance was met
+  kMaxIterations = 1,  ///< stopped after max_iterations (the result is still the best found)
+  kSolverFailure = 2,  ///< CHOLMOD could not factorise even with large damping
+  kInvalidGraph = 3,   ///< an edge names a missing node, or nothing to optimise
 };
 
 const char* optimizationStatusName(OptimizationStatus status);
@@ -70,10 +70,10 @@ struct PoseGraphOptions {
 
 struct PoseGraphResult {
   OptimizationStatus status = OptimizationStatus::kInvalidGraph;
-  int iterations = 0;            ///< LM iterations (accepted or rejected steps)
-  double initial_cost = 0.0;     ///< robust cost sum rho(e^T Omega e) before
-  double final_cost = 0.0;       ///< and after
-  double time_ms = 0.0;          ///< wall time of optimize()
+  int iterations = 0;         ///< LM iterations (accepted or rejected steps)
+  double initial_cost = 0.0;  ///< robust cost sum rho(e^T Omega e) before
+  double final_cost = 0.0;    ///< and after
+  double time_ms = 0.0;       ///< wall time of optimize()
   int num_nodes = 0;
   int num_edges = 0;
   /// Per edge (in addEdge order): the robust weight rho'(e^T Omega e) at the solution, in

@@ -47,8 +47,8 @@ class Vocabulary {
   /// Trains a tree of at most branching^depth words from descriptors of several images (each a
   /// CV_8U matrix with 32 columns; other types are skipped). Deterministic for a given seed.
   /// An empty training set gives an empty vocabulary (transform() then returns empty vectors).
-  static Vocabulary train(const std::vector<cv::Mat>& image_descriptors, int branching,
-                          int depth, std::uint64_t seed);
+  static Vocabulary train(const std::vector<cv::Mat>& image_descriptors, int branching, int depth,
+                          std::uint64_t seed);
 
   bool empty() const { return num_words_ == 0; }
   int numWords() const { return num_words_; }

@@ -20,6 +20,7 @@
 // image per call for the filters that need a copy.
 
 #include <cstdint>
+
 #include <opencv2/core.hpp>
 
 #include "slamd/common/config.hpp"

@@ -57,9 +57,9 @@ struct FrameSourceStats {
   /// Of frames_dropped: frames a live source received faster than a camera sends them
   /// (capture.lcm.max_rate_hz), dropped before decoding.
   std::uint64_t frames_over_rate = 0;
-  std::uint64_t reconnects = 0;      ///< device re-opens after a disconnect
+  std::uint64_t reconnects = 0;       ///< device re-opens after a disconnect
   std::uint64_t clock_reanchors = 0;  ///< live stream's clock really jumped and was re-anchored
-  std::string last_error;            ///< most recent skip or failure message
+  std::string last_error;             ///< most recent skip or failure message
 };
 
 class FrameSource {

@@ -7,9 +7,10 @@
 // error. PNG and other formats go through cv::imdecode (libpng reports truncation and CRC errors).
 
 #include <cstdint>
-#include <opencv2/core.hpp>
 #include <string>
 #include <vector>
+
+#include <opencv2/core.hpp>
 
 #include "slamd/common/file_io.hpp"  // readFileBytes
 

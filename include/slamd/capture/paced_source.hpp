@@ -74,7 +74,7 @@ class PacedSource : public FrameSource {
   bool started_ = false;
   std::chrono::steady_clock::time_point start_;
   Utime first_utime_ = 0;
-  std::uint64_t index_ = 0;  ///< frames read or passed over since the first
+  std::uint64_t index_ = 0;        ///< frames read or passed over since the first
   bool pending_can_skip_ = false;  ///< pending_ came from a source that can pass over frames
   std::atomic<std::uint64_t> dropped_read_late_{0};
 };

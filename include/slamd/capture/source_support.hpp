@@ -81,7 +81,7 @@ class StreamClock {
   std::int64_t offset_us_ = 0;  ///< utime - arrival of the last accepted frame
   Utime last_utime_ = 0;        ///< timestamp of the last accepted frame
   std::int64_t last_jump_us_ = 0;
-  int run_length_ = 0;          ///< consecutive rejected frames agreeing with each other
+  int run_length_ = 0;  ///< consecutive rejected frames agreeing with each other
   std::int64_t run_offset_us_ = 0;
 };
 

@@ -54,5 +54,4 @@ TumFileList readTumFileList(const std::string& path);
 /// order is taken as depth first).
 TumAssociationList parseTumAssociations(const std::string& text, const std::string& source);
 
-
 }  // namespace slamd

@@ -79,8 +79,8 @@ class Config {
                          const std::string& allowed) const;
 
   std::string origin_ = "<defaults>";
-  std::map<std::string, std::string> values_;         ///< dotted key -> raw text
-  std::map<std::string, std::string> used_values_;    ///< dotted key -> value in effect
+  std::map<std::string, std::string> values_;       ///< dotted key -> raw text
+  std::map<std::string, std::string> used_values_;  ///< dotted key -> value in effect
 };
 
 }  // namespace slamd

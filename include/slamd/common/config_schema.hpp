@@ -64,8 +64,8 @@ struct ConfigKeyDescription {
   bool has_range = false;     ///< int and double keys: [min_value, max_value]
   double min_value = 0.0;
   double max_value = 0.0;
-  std::size_t list_length = 0;                                ///< list keys: required length
-  std::vector<std::pair<std::string, std::string>> choices;   ///< choice keys: {text, doc}
+  std::size_t list_length = 0;                               ///< list keys: required length
+  std::vector<std::pair<std::string, std::string>> choices;  ///< choice keys: {text, doc}
   std::string unit;
   std::string doc;
 
@@ -155,7 +155,8 @@ class ConfigSchema {
   std::vector<Row> rows_;
 };
 
-// --- helpers shared by the rows (config_schema.cpp) -----------------------------------------------
+// --- helpers shared by the rows (config_schema.cpp)
+// -----------------------------------------------
 
 namespace config_schema_detail {
 std::string outOfRange(const std::string& key, double value, double min_value, double max_value);
@@ -165,8 +166,7 @@ std::string notAChoice(const std::string& key, const std::vector<std::string>& t
 template <typename T>
 template <typename Field>
 ConfigSchema<T>&& ConfigSchema<T>::number(const char* name, Field field, double min_value,
-                                          double max_value, const char* unit,
-                                          const char* doc) && {
+                                          double max_value, const char* unit, const char* doc) && {
   using Value = std::decay_t<decltype(member(field, std::declval<T&>()))>;
   static_assert(std::is_arithmetic_v<Value> && !std::is_same_v<Value, bool>,
                 "number(): the member must be an int or floating-point type");
@@ -175,9 +175,8 @@ ConfigSchema<T>&& ConfigSchema<T>::number(const char* name, Field field, double 
   row.load = [=](Config& config, const std::string& key, T& object) {
     Value& value = member(field, object);
     if constexpr (std::is_integral_v<Value>) {
-      value = static_cast<Value>(config.getInt(key, static_cast<int>(value),
-                                               static_cast<int>(min_value),
-                                               static_cast<int>(max_value)));
+      value = static_cast<Value>(config.getInt(
+          key, static_cast<int>(value), static_cast<int>(min_value), static_cast<int>(max_value)));
     } else {
       value = static_cast<Value>(config.getDouble(key, value, min_value, max_value));
     }
@@ -204,8 +203,8 @@ ConfigSchema<T>&& ConfigSchema<T>::number(const char* name, Field field, double 
 
 template <typename T>
 template <typename Field, typename Read, typename Show>
-ConfigSchema<T>&& ConfigSchema<T>::plain(const char* name, Field field, const char* type,
-                                         Read read, Show show, const char* doc) && {
+ConfigSchema<T>&& ConfigSchema<T>::plain(const char* name, Field field, const char* type, Read read,
+                                         Show show, const char* doc) && {
   Row row;
   row.name = name;
   row.load = [=](Config& config, const std::string& key, T& object) {

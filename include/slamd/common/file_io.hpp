@@ -21,8 +21,7 @@ namespace slamd {
 /// `writer` streams the content and returns false to abandon the write (the temporary file is
 /// removed and <path> is untouched). Returns false with a sentence in *error on any failure
 /// (writer refused, open/write/fsync/rename error).
-bool writeFileAtomically(const std::string& path,
-                         const std::function<bool(std::ostream&)>& writer,
+bool writeFileAtomically(const std::string& path, const std::function<bool(std::ostream&)>& writer,
                          std::string* error = nullptr);
 
 /// The temporary file name writeFileAtomically() uses for `path`.

@@ -25,8 +25,8 @@ enum class PoseSource : std::int8_t { kOdometry = 0, kFilter = 1, kOptimized = 2
 const char* trackingStateName(TrackingState state);
 
 struct PoseEstimate {
-  Utime utime = 0;             ///< capture time of the frame
-  std::int64_t sequence = 0;   ///< +1 per published pose
+  Utime utime = 0;            ///< capture time of the frame
+  std::int64_t sequence = 0;  ///< +1 per published pose
   std::string parent_frame = "world";
   std::string child_frame = "camera";
   SE3 T_world_camera = SE3::Identity();

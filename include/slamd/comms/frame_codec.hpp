@@ -5,13 +5,13 @@
 // Decoding checks every field against the others (sizes, byte counts, encodings) and throws
 // FrameDecodeError with a sentence naming what is wrong; it never crashes on bad bytes.
 
-#include <stdexcept>
 #include <optional>
+#include <stdexcept>
 #include <string>
 
+#include "kinect/frame_msg_t.hpp"
 #include "slamd/common/config_schema.hpp"
 #include "slamd/common/rgbd_frame.hpp"
-#include "kinect/frame_msg_t.hpp"
 #include "slamd/rgbd_frame_t.hpp"
 
 namespace slamd {
@@ -33,10 +33,10 @@ DepthEncoding parseDepthEncoding(const std::string& text);
 
 struct FrameEncodeOptions {
   ColorEncoding color = ColorEncoding::kJpeg;
-  int jpeg_quality = 90;             ///< 1..100
+  int jpeg_quality = 90;                          ///< 1..100
   DepthEncoding depth = DepthEncoding::kZlibU16;  ///< zlib: a quarter of PNG's decode time
-  double depth_scale = 1000.0;       ///< raw units per metre (1000: millimetres)
-  int png_compression = 1;           ///< 0..9; 1 is fast and still ~2.5x smaller
+  double depth_scale = 1000.0;                    ///< raw units per metre (1000: millimetres)
+  int png_compression = 1;                        ///< 0..9; 1 is fast and still ~2.5x smaller
 };
 
 slamd::rgbd_frame_t encodeRgbdFrame(const RgbdFrame& frame, const FrameEncodeOptions& options);

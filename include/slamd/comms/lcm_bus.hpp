@@ -33,9 +33,8 @@ namespace slamd {
 
 class LcmBus {
  public:
-  using RawHandler =
-      std::function<void(const std::string& channel, const std::uint8_t* data, std::size_t size,
-                         Utime receive_utime)>;
+  using RawHandler = std::function<void(const std::string& channel, const std::uint8_t* data,
+                                        std::size_t size, Utime receive_utime)>;
 
   /// Connects; throws std::runtime_error naming the URL when LCM cannot start.
   explicit LcmBus(const std::string& url);
@@ -87,7 +86,9 @@ class LcmBus {
   /// (>0 handled, 0 timeout, <0 error). For programs without a handling thread.
   int handle(int timeout_ms);
 
-  std::uint64_t publishFailures() const { return publish_failures_.load(std::memory_order_relaxed); }
+  std::uint64_t publishFailures() const {
+    return publish_failures_.load(std::memory_order_relaxed);
+  }
   std::uint64_t malformedCount(const std::string& channel) const;
   std::uint64_t malformedTotal() const;
   const std::string& url() const { return url_; }

@@ -223,8 +223,8 @@ struct LcmLayout<slamd::rgbd_frame_t> {
 template <>
 struct LcmLayout<slamd::stage_status_t> {
   /// The name's length field and NUL, then the fixed fields.
-  static constexpr std::size_t kMinBytes =
-      lcm_bytes::kInt32 + 1 + 4 * lcm_bytes::kDouble + 2 * lcm_bytes::kInt32 + 3 * lcm_bytes::kInt64;
+  static constexpr std::size_t kMinBytes = lcm_bytes::kInt32 + 1 + 4 * lcm_bytes::kDouble +
+                                           2 * lcm_bytes::kInt32 + 3 * lcm_bytes::kInt64;
   static bool walk(LcmFieldWalker& w) {
     using namespace lcm_bytes;
     // name, rate_hz, latency_p50/p95/p99_ms, queue_depth, queue_capacity, drops, errors,

@@ -4,8 +4,8 @@
 #include <string>
 #include <vector>
 
-#include "slamd/common/pose_estimate.hpp"
 #include "bot_core/pose_t.hpp"
+#include "slamd/common/pose_estimate.hpp"
 #include "slamd/keyframe_trajectory_t.hpp"
 #include "slamd/pose_t.hpp"
 

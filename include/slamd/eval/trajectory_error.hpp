@@ -117,13 +117,13 @@ struct AteOptions {
 struct AtePair {
   double timestamp_gt_s = 0.0;
   double timestamp_est_s = 0.0;
-  Eigen::Vector3d position_gt_m = Eigen::Vector3d::Zero();       ///< ground-truth world frame
-  Eigen::Vector3d position_est_m = Eigen::Vector3d::Zero();      ///< aligned, ground-truth frame
+  Eigen::Vector3d position_gt_m = Eigen::Vector3d::Zero();   ///< ground-truth world frame
+  Eigen::Vector3d position_est_m = Eigen::Vector3d::Zero();  ///< aligned, ground-truth frame
   double error_m = 0.0;
 };
 
 struct AteResult {
-  std::vector<AtePair> pairs;    ///< sorted by ground-truth time
+  std::vector<AtePair> pairs;  ///< sorted by ground-truth time
   Alignment alignment;
   ErrorStatistics translation_m;
 };
@@ -148,8 +148,8 @@ const char* deltaUnitName(DeltaUnit unit);
 struct RpeOptions {
   double delta = 1.0;
   DeltaUnit delta_unit = DeltaUnit::kSeconds;
-  double offset_s = 0.0;   ///< added to the estimate's timestamps
-  double scale = 1.0;      ///< estimate relative translations are multiplied by this
+  double offset_s = 0.0;      ///< added to the estimate's timestamps
+  double scale = 1.0;         ///< estimate relative translations are multiplied by this
   std::size_t max_pairs = 0;  ///< 0 = every pair; otherwise a seeded random sample
   std::uint32_t seed = 42;
 };

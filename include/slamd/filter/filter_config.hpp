@@ -96,7 +96,7 @@ struct FilterConfig {
   /// Corridors give 15-40 supporting lines; the short, few lines of cluttered scenes (a desk:
   /// 5-10) meet at points that scatter by degrees.
   int min_update_lines = 12;
-  int max_landmarks = 4;  ///< a Manhattan world's 3 axes, plus one on probation
+  int max_landmarks = 4;                      ///< a Manhattan world's 3 axes, plus one on probation
   double initial_translation_sigma_m = 1e-6;  ///< the world frame is the first camera frame
   double initial_rotation_sigma_rad = 1e-6;
   double max_dt_s = 5.0;

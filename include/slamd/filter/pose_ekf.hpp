@@ -112,14 +112,14 @@ enum class EkfPredictStatus : std::int8_t {
 };
 
 enum class VpUpdateStatus : std::int8_t {
-  kAccepted = 0,    ///< associated with a landmark, passed the gate, state updated
-  kGated,           ///< best landmark's NIS above the gate: state unchanged
-  kNewLandmark,     ///< confirmed candidate: a landmark was created from this detection
-  kCandidate,       ///< no landmark accepted it; counted towards a new landmark
-  kBadMeasurement,  ///< non-finite pixel, or covariance NaN / not positive definite
-  kUnknownLandmark, ///< updateLandmark() with an id that does not exist
-  kNotVisible,      ///< the landmark's vanishing point is at infinity in the image
-  kProbation,       ///< inside the gate of a landmark on probation: refines it, pose unchanged
+  kAccepted = 0,     ///< associated with a landmark, passed the gate, state updated
+  kGated,            ///< best landmark's NIS above the gate: state unchanged
+  kNewLandmark,      ///< confirmed candidate: a landmark was created from this detection
+  kCandidate,        ///< no landmark accepted it; counted towards a new landmark
+  kBadMeasurement,   ///< non-finite pixel, or covariance NaN / not positive definite
+  kUnknownLandmark,  ///< updateLandmark() with an id that does not exist
+  kNotVisible,       ///< the landmark's vanishing point is at infinity in the image
+  kProbation,        ///< inside the gate of a landmark on probation: refines it, pose unchanged
 };
 
 /// What a measurement of a world direction is.

@@ -90,8 +90,8 @@ struct SurfaceAxis {
   Eigen::Vector3d direction_camera = Eigen::Vector3d::UnitZ();
   /// Covariance in PoseEkf::tangentBasis(direction_camera), radians^2.
   Eigen::Matrix2d covariance = Eigen::Matrix2d::Identity();
-  int num_cells = 0;   ///< planar cells supporting it
-  int num_points = 0;  ///< depth samples in those cells
+  int num_cells = 0;           ///< planar cells supporting it
+  int num_points = 0;          ///< depth samples in those cells
   double rms_angle_deg = 0.0;  ///< RMS angle of the supporting cells' normals from the axis
 };
 
@@ -125,7 +125,7 @@ class SurfaceAxisDetector {
     Eigen::Matrix2d information;  ///< inverse covariance of the normal in B(normal), rad^-2
     double weight = 0.0;          ///< mean of information's eigenvalues, rad^-2
     int num_points = 0;
-    bool used = false;       ///< already supports an axis
+    bool used = false;  ///< already supports an axis
   };
   void fitCells(const cv::Mat& depth_m);
   /// The best axis among unused cells whose normals are within orthogonality_deg of perpendicular

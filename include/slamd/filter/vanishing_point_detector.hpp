@@ -124,7 +124,7 @@ class VanishingPointDetector {
   std::vector<LineSegment> segments_;
   std::vector<int> inliers_;
   VanishingPointCounters counters_;
-  cv::Mat scaled_, blurred_, edges_;  ///< scratch images reused between frames
+  cv::Mat scaled_, blurred_, edges_;      ///< scratch images reused between frames
   cv::Ptr<cv::LineSegmentDetector> lsd_;  ///< only when segment_detector = lsd
 };
 

@@ -18,8 +18,9 @@
 // With filter.enabled = false the increments are only chained (the pose covariance still grows
 // with each odometry covariance), so the output stays comparable; with filter.vanishing_points =
 // false images are ignored, with filter.surface_axes = false depth images. Each frame's vanishing
-// point updates the EKF first, then its plane axes (strongest first). Conventions: see PoseEkf (world = first camera frame, covariances in
-// slamd's x y z rx ry rz order, rotation a right perturbation in the camera frame).
+// point updates the EKF first, then its plane axes (strongest first). Conventions: see PoseEkf
+// (world = first camera frame, covariances in slamd's x y z rx ry rz order, rotation a right
+// perturbation in the camera frame).
 
 #include <cstdint>
 #include <optional>

@@ -56,16 +56,16 @@ const char* toString(IntegrationStatus status);
 /// What one integrate() call did.
 struct IntegrationResult {
   IntegrationStatus status = IntegrationStatus::kOk;
-  std::string error;            ///< a sentence when status != kOk
-  DepthCloudStats depth;        ///< per-pixel accounting of the depth image
-  std::size_t points_filtered = 0;   ///< points after the voxel-grid filter
-  std::size_t points_off_map = 0;    ///< points outside the OcTree's addressable extent
-  std::size_t free_voxels = 0;       ///< distinct voxels updated as free
-  std::size_t occupied_voxels = 0;   ///< distinct voxels updated as occupied
+  std::string error;                ///< a sentence when status != kOk
+  DepthCloudStats depth;            ///< per-pixel accounting of the depth image
+  std::size_t points_filtered = 0;  ///< points after the voxel-grid filter
+  std::size_t points_off_map = 0;   ///< points outside the OcTree's addressable extent
+  std::size_t free_voxels = 0;      ///< distinct voxels updated as free
+  std::size_t occupied_voxels = 0;  ///< distinct voxels updated as occupied
   bool keyframe_cloud_kept = false;
-  double cloud_ms = 0.0;   ///< depth -> cloud
-  double filter_ms = 0.0;  ///< voxel-grid filter
-  double insert_ms = 0.0;  ///< transform + ray casting + OcTree update
+  double cloud_ms = 0.0;    ///< depth -> cloud
+  double filter_ms = 0.0;   ///< voxel-grid filter
+  double insert_ms = 0.0;   ///< transform + ray casting + OcTree update
   double raycast_ms = 0.0;  ///< of insert_ms: rays and the frame's distinct voxels
   double update_ms = 0.0;   ///< of insert_ms: OcTree updates (and colours)
 };
@@ -82,13 +82,13 @@ struct MapperStats {
   std::int64_t depth_negative = 0;
   std::int64_t depth_out_of_range = 0;  ///< too near or too far
   std::int64_t points_off_map = 0;
-  std::int64_t points_inserted = 0;     ///< endpoints after filtering, summed over frames
+  std::int64_t points_inserted = 0;  ///< endpoints after filtering, summed over frames
   std::int64_t updates_published = 0;
   std::int64_t full_maps_published = 0;
   std::int64_t snapshots_written = 0;
   std::int64_t snapshot_failures = 0;
   std::int64_t snapshot_retries = 0;  ///< snapshots written early because the previous one failed
-  std::int64_t keyframe_clouds = 0;          ///< currently kept
+  std::int64_t keyframe_clouds = 0;   ///< currently kept
   std::int64_t keyframe_clouds_refused = 0;  ///< not kept because of the memory budget
   std::int64_t keyframe_cloud_bytes = 0;
   std::int64_t rebuilds = 0;
@@ -98,7 +98,7 @@ struct MapperStats {
 struct MapFileResult {
   bool ok = false;
   std::string path;
-  std::string error;   ///< a sentence when !ok
+  std::string error;  ///< a sentence when !ok
   double seconds = 0.0;
 };
 

@@ -19,8 +19,7 @@
 namespace slamd {
 
 /// True when `data` is exactly one OcTree::writeBinaryData stream (or empty: an empty map).
-bool validateOctreeBinary(const std::uint8_t* data, std::size_t size,
-                          std::string* error = nullptr);
+bool validateOctreeBinary(const std::uint8_t* data, std::size_t size, std::string* error = nullptr);
 
 /// True when `data` is exactly one full (.ot) node stream whose nodes carry `value_bytes` each.
 bool validateOctreeFull(const std::uint8_t* data, std::size_t size, std::size_t value_bytes,
@@ -29,8 +28,8 @@ bool validateOctreeFull(const std::uint8_t* data, std::size_t size, std::size_t 
 /// The header of an OctoMap file (.bt "# Octomap OcTree binary file", .ot "# Octomap OcTree
 /// file"), as OctoMap's readers parse it: "id", "size", "res" and "data" lines, '#' comments.
 struct OctomapFileHeader {
-  bool binary = false;        ///< .bt (binary occupancy) rather than .ot (full)
-  std::string tree_type;      ///< "OcTree" or "ColorOcTree"
+  bool binary = false;    ///< .bt (binary occupancy) rather than .ot (full)
+  std::string tree_type;  ///< "OcTree" or "ColorOcTree"
   double resolution_m = 0.0;
   std::size_t data_offset = 0;  ///< first byte of the node stream
 };

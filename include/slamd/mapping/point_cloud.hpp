@@ -54,15 +54,15 @@ struct DepthToCloudOptions {
 
 /// Why each sampled pixel was or was not turned into a point.
 struct DepthCloudStats {
-  std::int64_t sampled = 0;    ///< pixels visited (after the stride)
-  std::int64_t valid = 0;      ///< points produced
-  std::int64_t nan = 0;        ///< NaN depth (no measurement)
-  std::int64_t infinite = 0;   ///< +/-inf depth
-  std::int64_t zero = 0;       ///< exactly 0 (no measurement in raw sensor units)
-  std::int64_t negative = 0;   ///< below 0
-  std::int64_t too_near = 0;   ///< 0 < depth < min_depth_m
-  std::int64_t too_far = 0;    ///< depth > max_depth_m
-  bool color_used = false;     ///< colour attached (CV_8UC3 of the depth image's size)
+  std::int64_t sampled = 0;   ///< pixels visited (after the stride)
+  std::int64_t valid = 0;     ///< points produced
+  std::int64_t nan = 0;       ///< NaN depth (no measurement)
+  std::int64_t infinite = 0;  ///< +/-inf depth
+  std::int64_t zero = 0;      ///< exactly 0 (no measurement in raw sensor units)
+  std::int64_t negative = 0;  ///< below 0
+  std::int64_t too_near = 0;  ///< 0 < depth < min_depth_m
+  std::int64_t too_far = 0;   ///< depth > max_depth_m
+  bool color_used = false;    ///< colour attached (CV_8UC3 of the depth image's size)
 
   std::int64_t rejected() const { return nan + infinite + zero + negative + too_near + too_far; }
 };

@@ -90,20 +90,20 @@ struct SourceStep {
 struct EdgeStats {
   std::string policy;
   std::size_t capacity = 0;
-  std::size_t depth = 0;           ///< items waiting now (approximate while running)
-  std::uint64_t pushed = 0;        ///< items offered by the producer
-  std::uint64_t delivered = 0;     ///< items handed to the consumer
-  std::uint64_t dropped = 0;       ///< items dropped by the policy
-  std::uint64_t discarded = 0;     ///< items thrown away by an aborted shutdown
+  std::size_t depth = 0;        ///< items waiting now (approximate while running)
+  std::uint64_t pushed = 0;     ///< items offered by the producer
+  std::uint64_t delivered = 0;  ///< items handed to the consumer
+  std::uint64_t dropped = 0;    ///< items dropped by the policy
+  std::uint64_t discarded = 0;  ///< items thrown away by an aborted shutdown
 };
 
 /// Counters of one node.
 struct StageStats {
   std::string name;
-  std::uint64_t processed = 0;  ///< inputs processed (sources: items produced), not heartbeats
+  std::uint64_t processed = 0;   ///< inputs processed (sources: items produced), not heartbeats
   std::uint64_t heartbeats = 0;  ///< heartbeat items passed on (see above)
-  std::uint64_t emitted = 0;    ///< outputs passed on
-  std::uint64_t errors = 0;     ///< process() calls that threw (item dropped, pipeline continues)
+  std::uint64_t emitted = 0;     ///< outputs passed on
+  std::uint64_t errors = 0;      ///< process() calls that threw (item dropped, pipeline continues)
   std::vector<std::uint64_t> latency_buckets;  ///< LatencyHistogram::snapshot() of process()
   LatencySummary latency;
   std::vector<EdgeStats> inputs;  ///< empty for sources
@@ -145,8 +145,7 @@ class NodeBase;
 template <typename T>
 class Edge {
  public:
-  Edge(const EdgeOptions& options, RunControl* control)
-      : options_(options), control_(control) {
+  Edge(const EdgeOptions& options, RunControl* control) : options_(options), control_(control) {
     if (options.capacity == 0) throw std::invalid_argument("edge capacity must be at least 1");
     if (options.policy == EdgePolicy::kBackpressure) {
       blocking_queue_ = std::make_unique<SpscQueue<T>>(options.capacity);
@@ -186,8 +185,10 @@ class Edge {
 
   /// Producer side: end of stream.
   void close() {
-    if (blocking_queue_) blocking_queue_->close();
-    else evicting_queue_->close();
+    if (blocking_queue_)
+      blocking_queue_->close();
+    else
+      evicting_queue_->close();
     data_signal_.notify();
   }
 
@@ -261,7 +262,7 @@ class Edge {
  private:
   EdgeOptions options_;
   RunControl* control_;
-  std::unique_ptr<SpscQueue<T>> blocking_queue_;     // kBackpressure
+  std::unique_ptr<SpscQueue<T>> blocking_queue_;        // kBackpressure
   std::unique_ptr<DropOldestQueue<T>> evicting_queue_;  // kDropOldest, kDrainToNewest
   WakeSignal data_signal_;   // producer -> consumer: an item or end of stream arrived
   WakeSignal space_signal_;  // consumer -> producer: a slot became free
@@ -516,8 +517,8 @@ class StageNode final : public NodeBase {
   struct NoOutput {};
   std::shared_ptr<Edge<In>> input_;
   Function fn_;
-  std::conditional_t<std::is_void_v<Out>, NoOutput, OutputPort<std::conditional_t<
-                                                        std::is_void_v<Out>, int, Out>>>
+  std::conditional_t<std::is_void_v<Out>, NoOutput,
+                     OutputPort<std::conditional_t<std::is_void_v<Out>, int, Out>>>
       output_;
 };
 
@@ -538,8 +539,8 @@ class Outlet {
 
 /// Outcome of stop().
 struct StopReport {
-  bool drained = true;           ///< every queued item was processed before the deadline
-  std::uint64_t discarded = 0;   ///< items thrown away because the deadline passed
+  bool drained = true;          ///< every queued item was processed before the deadline
+  std::uint64_t discarded = 0;  ///< items thrown away because the deadline passed
   double elapsed_ms = 0.0;
 };
 
@@ -608,7 +609,7 @@ class Pipeline {
     }
     auto queue = std::make_shared<pipeline_detail::Edge<In>>(edge, &control_);
     auto node = std::make_unique<pipeline_detail::StageNode<In, Out>>(name, &control_, queue,
-                                                                       std::move(fn));
+                                                                      std::move(fn));
     auto* raw = node.get();
     input.port_->connect(queue, raw);
     nodes_.push_back(std::move(node));

@@ -12,7 +12,8 @@
 //   tum:DIR            TUM RGB-D folder (TumSource; capture.tum.*, camera.* with depth scale 5000)
 //   openni2[:URI]      OpenNI2 device, first one without URI (OpenNi2Source; capture.openni2.*)
 //   oni:FILE           OpenNI2 recording, played once (capture.oni.realtime; capture.pacing.mode
-//                      realtime plays it with OpenNI's own real-time player at capture.pacing.speed)
+//                      realtime plays it with OpenNI's own real-time player at
+//                      capture.pacing.speed)
 //   lcm:CHANNEL        slamd.rgbd_frame_t / kinect.frame_msg_t on LCM (LcmFrameSource;
 //                      capture.lcm.*)
 //   synthetic:SCENE    slamd's synthetic worlds (createSyntheticSource; synthetic.*)

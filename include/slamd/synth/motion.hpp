@@ -52,10 +52,10 @@ struct MotionParams {
   double step_hz = 1.8;             ///< walking step frequency (head bob)
   double head_bob_m = 0.02;         ///< vertical bob amplitude
   double robot_speed_mps = 0.4;
-  double robot_height_m = 0.5;      ///< camera height of the robot
-  double max_speed_mps = 0.35;      ///< peak speed of the random motion
+  double robot_height_m = 0.5;          ///< camera height of the robot
+  double max_speed_mps = 0.35;          ///< peak speed of the random motion
   double max_angular_rate_radps = 0.6;  ///< peak rotation rate of the random motion
-  double max_turn_rate_radps = 1.2;  ///< walkers and robots slow down so turns stay below this
+  double max_turn_rate_radps = 1.2;     ///< walkers and robots slow down so turns stay below this
 
   /// The motion's `synthetic.*` keys (rows in motion.cpp).
   static const ConfigSchema<MotionParams>& schema();
@@ -64,8 +64,7 @@ struct MotionParams {
 
 class CameraMotion {
  public:
-  CameraMotion(const Scene& scene, MotionKind kind, const MotionParams& params,
-               std::uint64_t seed);
+  CameraMotion(const Scene& scene, MotionKind kind, const MotionParams& params, std::uint64_t seed);
 
   /// T_world_camera at time t_s (seconds from the start of the motion).
   SE3 poseAt(double t_s) const;

@@ -30,11 +30,12 @@ namespace slamd::synth {
 /// points right and edge_v points down, so textures appear upright; from behind it is invisible
 /// (back-face culled), so every surface of a scene faces the free space.
 struct SurfaceRect {
-  Eigen::Vector3d origin_world = Eigen::Vector3d::Zero();  ///< top-left corner seen from the front, metres
+  Eigen::Vector3d origin_world =
+      Eigen::Vector3d::Zero();  ///< top-left corner seen from the front, metres
   Eigen::Vector3d edge_u_world = Eigen::Vector3d::UnitX();  ///< top edge, left to right, metres
   Eigen::Vector3d edge_v_world = Eigen::Vector3d::UnitY();  ///< left edge, top to bottom, metres
-  int texture = 0;            ///< index into Scene::textures
-  bool wrap_texture = true;   ///< tile the texture (walls) or stretch it once (posters)
+  int texture = 0;                                          ///< index into Scene::textures
+  bool wrap_texture = true;      ///< tile the texture (walls) or stretch it once (posters)
   double texels_per_m_u = 50.0;  ///< texture resolution along edge_u
   double texels_per_m_v = 50.0;  ///< texture resolution along edge_v
   Eigen::Vector2d texel_offset = Eigen::Vector2d::Zero();  ///< texel at the origin corner
@@ -53,9 +54,9 @@ struct SceneParams {
   double corridor_length_m = 30.0;
   double corridor_width_m = 2.0;
   double corridor_height_m = 2.6;
-  double loop_length_m = 16.0;   ///< outer x extent of the ring corridor
-  double loop_width_m = 10.0;    ///< outer y extent of the ring corridor
-  int wall_texture_px = 1024;    ///< wall texture side (power of two), 2 cm per texel
+  double loop_length_m = 16.0;  ///< outer x extent of the ring corridor
+  double loop_width_m = 10.0;   ///< outer y extent of the ring corridor
+  int wall_texture_px = 1024;   ///< wall texture side (power of two), 2 cm per texel
 
   /// The scene's `synthetic.*` keys (rows in scene.cpp).
   static const ConfigSchema<SceneParams>& schema();

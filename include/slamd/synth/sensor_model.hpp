@@ -41,20 +41,20 @@ namespace slamd::synth {
 struct SensorParams {
   bool depth_noise = true;
   bool depth_quantization = true;
-  double min_range_m = 0.5;        ///< 0 disables the near gate
-  double max_range_m = 4.5;        ///< 0 disables the far gate
-  double max_incidence_deg = 80.0; ///< 90 disables the grazing-angle dropout
-  int edge_band_px = 1;            ///< 0 disables the dropout at depth edges
+  double min_range_m = 0.5;          ///< 0 disables the near gate
+  double max_range_m = 4.5;          ///< 0 disables the far gate
+  double max_incidence_deg = 80.0;   ///< 90 disables the grazing-angle dropout
+  int edge_band_px = 1;              ///< 0 disables the dropout at depth edges
   double edge_jump_fraction = 0.04;  ///< depth jump (fraction of z) that makes an edge
-  double ir_focal_px = 580.0;      ///< focal length of the IR camera, pixels
-  double baseline_m = 0.075;       ///< projector-camera baseline, metres
-  int disparity_subpixel = 8;      ///< disparity steps per pixel
-  double color_noise_std = 2.0;    ///< grey levels (0..255), 0 disables
-  double exposure_variation = 0.0; ///< peak relative gain change, 0 disables (e.g. 0.15)
-  bool motion_blur = false;        ///< average renders over the exposure time
-  double exposure_time_s = 0.012;  ///< shutter time for the motion blur, centred on the timestamp
-  int blur_samples = 5;            ///< renders averaged per blurred frame (odd: one is the frame's)
-  bool exact_mode = false;         ///< made by exact(): the defaults above are all off
+  double ir_focal_px = 580.0;        ///< focal length of the IR camera, pixels
+  double baseline_m = 0.075;         ///< projector-camera baseline, metres
+  int disparity_subpixel = 8;        ///< disparity steps per pixel
+  double color_noise_std = 2.0;      ///< grey levels (0..255), 0 disables
+  double exposure_variation = 0.0;   ///< peak relative gain change, 0 disables (e.g. 0.15)
+  bool motion_blur = false;          ///< average renders over the exposure time
+  double exposure_time_s = 0.012;    ///< shutter time for the motion blur, centred on the timestamp
+  int blur_samples = 5;     ///< renders averaged per blurred frame (odd: one is the frame's)
+  bool exact_mode = false;  ///< made by exact(): the defaults above are all off
 
   /// Every effect off: depth and colour are the exact render.
   static SensorParams exact();

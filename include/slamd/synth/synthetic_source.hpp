@@ -77,9 +77,7 @@ class SyntheticSource : public FrameSource {
   FrameSourceStats stats() const override { return counters_.snapshot(); }
   std::string description() const override;
   bool isLive() const override { return false; }
-  std::optional<CameraIntrinsics> intrinsics() const override {
-    return config_.camera.intrinsics;
-  }
+  std::optional<CameraIntrinsics> intrinsics() const override { return config_.camera.intrinsics; }
   std::optional<Trajectory> groundTruth() const override { return ground_truth_; }
   std::optional<Utime> upcomingUtime(std::size_t ahead) const override;
   bool dropUpcoming() override;

@@ -73,10 +73,15 @@ inline cv::Vec3f Texture::sample(double x_texel, double y_texel, int level, bool
   long long y1 = y0 + 1;
   if (wrap) {
     const long long mask = n - 1;
-    x0 &= mask; x1 &= mask; y0 &= mask; y1 &= mask;
+    x0 &= mask;
+    x1 &= mask;
+    y0 &= mask;
+    y1 &= mask;
   } else {
-    x0 = std::clamp<long long>(x0, 0, n - 1); x1 = std::clamp<long long>(x1, 0, n - 1);
-    y0 = std::clamp<long long>(y0, 0, n - 1); y1 = std::clamp<long long>(y1, 0, n - 1);
+    x0 = std::clamp<long long>(x0, 0, n - 1);
+    x1 = std::clamp<long long>(x1, 0, n - 1);
+    y0 = std::clamp<long long>(y0, 0, n - 1);
+    y1 = std::clamp<long long>(y1, 0, n - 1);
   }
   const auto* row0 = image.ptr<cv::Vec3b>(static_cast<int>(y0));
   const auto* row1 = image.ptr<cv::Vec3b>(static_cast<int>(y1));
@@ -86,8 +91,10 @@ inline cv::Vec3f Texture::sample(double x_texel, double y_texel, int level, bool
   const cv::Vec3b& d = row1[x1];
   cv::Vec3f out;
   for (int k = 0; k < 3; ++k) {
-    const float top = static_cast<float>(a[k]) + tx * (static_cast<float>(b[k]) - static_cast<float>(a[k]));
-    const float bottom = static_cast<float>(c[k]) + tx * (static_cast<float>(d[k]) - static_cast<float>(c[k]));
+    const float top =
+        static_cast<float>(a[k]) + tx * (static_cast<float>(b[k]) - static_cast<float>(a[k]));
+    const float bottom =
+        static_cast<float>(c[k]) + tx * (static_cast<float>(d[k]) - static_cast<float>(c[k]));
     out[k] = top + ty * (bottom - top);
   }
   return out;

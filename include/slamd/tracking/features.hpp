@@ -29,7 +29,7 @@ struct FeatureSet {
   /// d(1/z)/du and d(1/z)/dv at each raw keypoint (1/m per pixel): the slope of the surface
   /// around the feature; zero where the depth around it is missing or broken. May be empty.
   std::vector<Eigen::Vector2d> inverse_depth_gradient;
-  cv::Mat gray;                         ///< the image the features come from (CV_8UC1, shared)
+  cv::Mat gray;  ///< the image the features come from (CV_8UC1, shared)
   /// gray smoothed for patch alignment (tracking.align_blur_sigma_px; gray itself when 0)
   cv::Mat align_gray;
   int num_with_depth = 0;
@@ -90,8 +90,7 @@ bool alignPatch(const cv::Mat& templ, const cv::Point2f& templ_px, const cv::Mat
 /// Keeps at most max_total features, at most max_total / (cols * rows) per grid cell (strongest
 /// response first); cells left under quota give their share to the strongest remaining ones.
 std::vector<cv::KeyPoint> bucketKeypoints(const std::vector<cv::KeyPoint>& keypoints,
-                                          cv::Size image_size, int cols, int rows,
-                                          int max_total);
+                                          cv::Size image_size, int cols, int rows, int max_total);
 
 /// Distance between descriptor rows a.row(i) and b.row(j) in the given norm.
 int descriptorDistance(const cv::Mat& a, int i, const cv::Mat& b, int j, DescriptorNorm norm);

@@ -28,12 +28,12 @@ namespace slamd {
 
 /// One putative correspondence: a reference 3D point and its observation in the current frame.
 struct Correspondence {
-  Eigen::Vector3d point_ref;   ///< reference camera frame, metres (always valid)
-  Eigen::Vector2d pixel_curr;  ///< undistorted pixel in the current image
-  double depth_curr_m = 0.0;   ///< depth at the current keypoint, metres; NaN when unknown
-  double pixel_sigma_px = 1.0; ///< keypoint noise in the current image, pixels
-  int ref_index = -1;          ///< feature index in the reference frame
-  int curr_index = -1;         ///< feature index in the current frame
+  Eigen::Vector3d point_ref;    ///< reference camera frame, metres (always valid)
+  Eigen::Vector2d pixel_curr;   ///< undistorted pixel in the current image
+  double depth_curr_m = 0.0;    ///< depth at the current keypoint, metres; NaN when unknown
+  double pixel_sigma_px = 1.0;  ///< keypoint noise in the current image, pixels
+  int ref_index = -1;           ///< feature index in the reference frame
+  int curr_index = -1;          ///< feature index in the current frame
 
   bool hasCurrDepth() const { return depth_curr_m == depth_curr_m; }
   /// Current point in the current camera frame (metres); only meaningful with depth.
@@ -70,8 +70,8 @@ std::vector<int> maximumConsistentClique(const std::vector<Correspondence>& matc
 
 struct RefinementOptions {
   int max_iterations = 10;
-  double huber_k = 1.5;             ///< Huber width, in sigmas
-  double depth_sigma_coeff = 0.0015;///< sigma_z = coeff * z^2 (1/m); 0 = no depth residual
+  double huber_k = 1.5;               ///< Huber width, in sigmas
+  double depth_sigma_coeff = 0.0015;  ///< sigma_z = coeff * z^2 (1/m); 0 = no depth residual
   /// Estimate the noise of the reprojection and of the depth residuals from the data (robustly,
   /// from the median residual at the initial pose) and whiten each kind by its own scale, so
   /// that the kernel width and the relative weight of pixels and depth follow the actual noise.

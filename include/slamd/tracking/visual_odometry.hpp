@@ -51,28 +51,28 @@ const char* odometryStatusName(OdometryStatus status);
 
 /// A keyframe: what mapping and the back end consume. Immutable once published.
 struct Keyframe {
-  std::int64_t id = 0;           ///< 0, 1, 2, ... across segments
-  std::int64_t segment = 0;      ///< tracking segment (incremented after LOST)
-  Utime utime = 0;               ///< capture time of the frame
+  std::int64_t id = 0;       ///< 0, 1, 2, ... across segments
+  std::int64_t segment = 0;  ///< tracking segment (incremented after LOST)
+  Utime utime = 0;           ///< capture time of the frame
   std::int64_t frame_sequence = 0;
   SE3 T_world_camera = SE3::Identity();  ///< odometry pose when the keyframe was made
   CameraIntrinsics intrinsics;
-  FeatureSet features;   ///< keypoints, descriptors, undistorted pixels, 3D points (camera frame)
-  RgbdFramePtr frame;    ///< images (null when processFrame got a reference, not a pointer)
+  FeatureSet features;  ///< keypoints, descriptors, undistorted pixels, 3D points (camera frame)
+  RgbdFramePtr frame;   ///< images (null when processFrame got a reference, not a pointer)
 };
 using KeyframePtr = std::shared_ptr<const Keyframe>;
 
 struct OdometryStats {
-  int num_features = 0;         ///< features detected in the current frame
+  int num_features = 0;  ///< features detected in the current frame
   int num_features_with_depth = 0;
-  int num_matches = 0;          ///< putative matches with the reference
-  int num_inliers = 0;          ///< matches consistent with the estimated motion
+  int num_matches = 0;                 ///< putative matches with the reference
+  int num_inliers = 0;                 ///< matches consistent with the estimated motion
   double reprojection_error_px = 0.0;  ///< RMS over the inliers
   bool used_guided_matching = false;
-  bool used_previous_frame = false;    ///< the keyframe failed; tracked from the previous frame
-  double time_features_ms = 0.0;       ///< extraction + undistortion + depth
+  bool used_previous_frame = false;  ///< the keyframe failed; tracked from the previous frame
+  double time_features_ms = 0.0;     ///< extraction + undistortion + depth
   double time_matching_ms = 0.0;
-  double time_motion_ms = 0.0;         ///< RANSAC / clique + refinement
+  double time_motion_ms = 0.0;  ///< RANSAC / clique + refinement
   double time_total_ms = 0.0;
 };
 
@@ -102,7 +102,7 @@ struct OdometryResult {
   SE3 T_world_camera = SE3::Identity();
   std::int64_t segment = 0;
   bool is_keyframe = false;
-  KeyframePtr keyframe;   ///< set when is_keyframe
+  KeyframePtr keyframe;  ///< set when is_keyframe
   OdometryStats stats;
 };
 
