@@ -116,10 +116,12 @@ std::vector<std::string> listOpenNi2Devices() {
   openni::OpenNI::enumerateDevices(&devices);
   std::vector<std::string> out;
   for (int i = 0; i < devices.getSize(); ++i) {
-    // OpenNI lists every device it has opened, including the DummyDevice and .oni files.
+    // OpenNI lists every device it has opened, including the DummyDevice and .oni files (also
+    // after the file is deleted: the OniFile driver names them "oni File").
     const std::string uri = devices[i].getUri();
+    const std::string name = devices[i].getName();
     std::error_code error;
-    if (uri == "Dummy" || std::filesystem::exists(uri, error)) continue;
+    if (uri == "Dummy" || name == "oni File" || std::filesystem::exists(uri, error)) continue;
     out.push_back(std::string(devices[i].getUri()) + " (" + devices[i].getVendor() + " " +
                   devices[i].getName() + ")");
   }
@@ -406,61 +408,162 @@ std::string OpenNi2Source::description() const {
   return "openni2:" + (uri_.empty() ? std::string("first device") : uri_);
 }
 
+// next() waits for a depth frame and its colour partner (reopening a disconnected device first),
+// then converts the pair. Each step below is one part of that.
+
+std::optional<FrameRead> OpenNi2Source::reopenIfDisconnected(SteadyTime deadline) {
+  Impl& s = *impl_;
+  if (!s.disconnected) return std::nullopt;
+  const FrameRead timed_out{FrameRead::Status::kTimeout, {}, {}};
+  if (std::chrono::steady_clock::now() < s.reopen_at) {
+    // Backoff wait (bounded by the caller's timeout), not synchronisation.
+    std::this_thread::sleep_until(std::min(s.reopen_at, deadline));
+    return timed_out;
+  }
+  try {
+    openDevice(kind_, uri_, config_, s);
+    s.disconnected = false;
+    s.backoff_s = config_.reconnect_initial_s;
+    counters_.reconnected();
+    SLAMD_LOG_INFO(kComponent) << "reopened " << description();
+    return std::nullopt;
+  } catch (const SourceError& e) {
+    s.backoff_s = std::min(s.backoff_s * 2.0, config_.reconnect_max_s);
+    s.reopen_at = std::chrono::steady_clock::now() +
+                  std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+                      std::chrono::duration<double>(s.backoff_s));
+    counters_.failure(kComponent, std::string("reconnect failed: ") + e.what() +
+                                      "; next attempt in " + std::to_string(s.backoff_s) + " s");
+    return timed_out;
+  }
+}
+
+bool OpenNi2Source::reachedEndOfRecording() const {
+  const Impl& s = *impl_;
+  if (kind_ != Kind::kFile || s.depth_frames_total < 0) return false;
+  const bool depth_done = s.last_depth_index >= s.depth_frames_total;
+  const bool color_done = !s.has_color || s.last_color_index >= s.color_frames_total;
+  return depth_done && color_done && !s.pending_depth.isValid();
+}
+
+FrameRead OpenNi2Source::declareStalled(SteadyTime now) {
+  // A recording that stops delivering has ended; a device has gone: close it and reopen later.
+  if (kind_ == Kind::kFile) return FrameRead{FrameRead::Status::kEndOfStream, {}, {}};
+  Impl& s = *impl_;
+  s.closeAll();
+  s.disconnected = true;
+  s.reopen_at = now + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+                          std::chrono::duration<double>(s.backoff_s));
+  counters_.failure(kComponent, description() + ": no frame for " +
+                                    std::to_string(config_.frame_timeout_s) +
+                                    " s, device disconnected; reopening");
+  return FrameRead{FrameRead::Status::kTimeout, {}, {}};
+}
+
+void OpenNi2Source::countLostDepthFrame() {
+  // A depth frame that will never be delivered: in real-time playback the reader was behind, on
+  // a device depth and colour lost sync. A colour image alone is not a frame.
+  if (kind_ == Kind::kFile && config_.oni_realtime) {
+    counters_.droppedBehindSchedule();
+  } else {
+    counters_.dropped();
+  }
+}
+
+bool OpenNi2Source::pendingFramesArePaired() {
+  Impl& s = *impl_;
+  if (!s.pending_depth.isValid() || (s.has_color && !s.pending_color.isValid())) return false;
+  if (!s.has_color) return true;
+  // With sync on, the two frames carry (nearly) the same device timestamp.
+  const int fps = std::max(1, s.depth.getVideoMode().getFps());
+  const auto half_period_us = static_cast<std::int64_t>(500000 / fps);
+  const auto td = static_cast<std::int64_t>(s.pending_depth.getTimestamp());
+  const auto tc = static_cast<std::int64_t>(s.pending_color.getTimestamp());
+  if (std::llabs(td - tc) <= half_period_us) return true;
+  // The older one has no partner any more: drop it and wait for the next.
+  if (td < tc) {
+    s.pending_depth.release();
+    countLostDepthFrame();
+  } else {
+    s.pending_color.release();
+  }
+  return false;
+}
+
+FrameRead OpenNi2Source::frameFromPendingPair() {
+  Impl& s = *impl_;
+  openni::VideoFrameRef depth_frame = s.pending_depth;
+  openni::VideoFrameRef color_frame = s.pending_color;
+  s.pending_depth.release();
+  s.pending_color.release();
+
+  const std::string what = description() + " frame " + std::to_string(depth_frame.getFrameIndex());
+  const int width = depth_frame.getWidth();
+  const int height = depth_frame.getHeight();
+  if (width <= 0 || height <= 0 || depth_frame.getStrideInBytes() < width * 2 ||
+      depth_frame.getDataSize() < depth_frame.getStrideInBytes() * height) {
+    return skipFrame(counters_, kComponent, what + ": depth buffer inconsistent with its size");
+  }
+  auto out = std::make_shared<RgbdFrame>();
+  const cv::Mat raw(height, width, CV_16UC1, const_cast<void*>(depth_frame.getData()),
+                    static_cast<std::size_t>(depth_frame.getStrideInBytes()));
+  out->depth_m = depthRawToMeters(raw, s.depth_scale);
+  if (s.has_color) {
+    const openni::PixelFormat format = color_frame.getVideoMode().getPixelFormat();
+    if (color_frame.getWidth() != width || color_frame.getHeight() != height) {
+      return skipFrame(counters_, kComponent,
+                       what + ": colour is " + std::to_string(color_frame.getWidth()) + "x" +
+                           std::to_string(color_frame.getHeight()) + ", depth is " +
+                           std::to_string(width) + "x" + std::to_string(height));
+    }
+    const int channels = format == openni::PIXEL_FORMAT_RGB888 ? 3 : 1;
+    if (!isColorFormat(format) || color_frame.getStrideInBytes() < width * channels ||
+        color_frame.getDataSize() < color_frame.getStrideInBytes() * height) {
+      return skipFrame(counters_, kComponent,
+                       what + ": colour format " + pixelFormatName(format) +
+                           " or buffer not supported (RGB888 or GRAY8)");
+    }
+    const cv::Mat color(height, width, channels == 3 ? CV_8UC3 : CV_8UC1,
+                        const_cast<void*>(color_frame.getData()),
+                        static_cast<std::size_t>(color_frame.getStrideInBytes()));
+    cv::cvtColor(color, out->color_bgr, channels == 3 ? cv::COLOR_RGB2BGR : cv::COLOR_GRAY2BGR);
+    ensureGray(*out);
+  }
+  const auto device_us = static_cast<std::uint64_t>(depth_frame.getTimestamp());
+  if (kind_ == Kind::kFile) {
+    out->utime = static_cast<Utime>(device_us);
+  } else {
+    if (!s.clock_anchored || device_us < s.first_device_us) {
+      s.clock_anchored = true;
+      s.first_device_us = device_us;
+      s.first_wall_utime = wallClockUtime();
+    }
+    out->utime = s.first_wall_utime + static_cast<Utime>(device_us - s.first_device_us);
+  }
+  out->sequence = depth_frame.getFrameIndex();
+  out->intrinsics = s.device_intrinsics;
+  if (out->intrinsics.width != width || out->intrinsics.height != height) {
+    out->intrinsics = out->intrinsics.scaled(width, height);
+  }
+  out->received_steady_ns = steadyNowNs();
+  const std::string error = gate_.check(*out, what);
+  if (!error.empty()) return skipFrame(counters_, kComponent, error);
+  counters_.frameRead();
+  return FrameRead{FrameRead::Status::kFrame, std::move(out), {}};
+}
+
 FrameRead OpenNi2Source::next(std::chrono::milliseconds timeout) {
   Impl& s = *impl_;
-  const auto deadline = std::chrono::steady_clock::now() + timeout;
-  const FrameRead timed_out{FrameRead::Status::kTimeout, {}, {}};
-
-  if (s.disconnected) {
-    const auto now = std::chrono::steady_clock::now();
-    if (now < s.reopen_at) {
-      // Backoff wait (bounded by the caller's timeout), not synchronisation.
-      std::this_thread::sleep_until(std::min(s.reopen_at, deadline));
-      return timed_out;
-    }
-    try {
-      openDevice(kind_, uri_, config_, s);
-      s.disconnected = false;
-      s.backoff_s = config_.reconnect_initial_s;
-      counters_.reconnected();
-      SLAMD_LOG_INFO(kComponent) << "reopened " << description();
-    } catch (const SourceError& e) {
-      s.backoff_s = std::min(s.backoff_s * 2.0, config_.reconnect_max_s);
-      s.reopen_at = std::chrono::steady_clock::now() +
-                    std::chrono::duration_cast<std::chrono::steady_clock::duration>(
-                        std::chrono::duration<double>(s.backoff_s));
-      counters_.failure(kComponent, std::string("reconnect failed: ") + e.what() +
-                                        "; next attempt in " + std::to_string(s.backoff_s) + " s");
-      return timed_out;
-    }
-  }
+  const SteadyTime deadline = std::chrono::steady_clock::now() + timeout;
+  if (auto waiting = reopenIfDisconnected(deadline)) return *waiting;
 
   const auto frame_timeout = std::chrono::duration_cast<std::chrono::steady_clock::duration>(
       std::chrono::duration<double>(config_.frame_timeout_s));
-  auto reachedEnd = [&] {
-    if (kind_ != Kind::kFile || s.depth_frames_total < 0) return false;
-    const bool depth_done = s.last_depth_index >= s.depth_frames_total;
-    const bool color_done = !s.has_color || s.last_color_index >= s.color_frames_total;
-    return depth_done && color_done;
-  };
-
   while (true) {
-    if (reachedEnd() && !s.pending_depth.isValid()) {
-      return FrameRead{FrameRead::Status::kEndOfStream, {}, {}};
-    }
+    if (reachedEndOfRecording()) return FrameRead{FrameRead::Status::kEndOfStream, {}, {}};
     const auto now = std::chrono::steady_clock::now();
-    if (now - s.last_frame_time > frame_timeout) {
-      if (kind_ == Kind::kFile) return FrameRead{FrameRead::Status::kEndOfStream, {}, {}};
-      s.closeAll();
-      s.disconnected = true;
-      s.reopen_at = now + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
-                              std::chrono::duration<double>(s.backoff_s));
-      counters_.failure(kComponent, description() + ": no frame for " +
-                                        std::to_string(config_.frame_timeout_s) +
-                                        " s, device disconnected; reopening");
-      return timed_out;
-    }
-    if (now >= deadline) return timed_out;
+    if (now - s.last_frame_time > frame_timeout) return declareStalled(now);
+    if (now >= deadline) return FrameRead{FrameRead::Status::kTimeout, {}, {}};
     const auto remaining_ms = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - now);
     const auto until_stall_ms = std::chrono::duration_cast<std::chrono::milliseconds>(
         s.last_frame_time + frame_timeout - now);
@@ -480,17 +583,8 @@ FrameRead OpenNi2Source::next(std::chrono::milliseconds timeout) {
     openni::VideoFrameRef frame;
     if (streams[index]->readFrame(&frame) != openni::STATUS_OK || !frame.isValid()) continue;
     s.last_frame_time = std::chrono::steady_clock::now();
-    // A depth frame that will never be delivered: in real-time playback the reader was behind,
-    // on a device depth and colour lost sync. A colour image alone is not a frame.
-    auto depthFrameLost = [&] {
-      if (kind_ == Kind::kFile && config_.oni_realtime) {
-        counters_.droppedBehindSchedule();
-      } else {
-        counters_.dropped();
-      }
-    };
     if (index == 0) {
-      if (s.pending_depth.isValid()) depthFrameLost();  // replaced before its colour came
+      if (s.pending_depth.isValid()) countLostDepthFrame();  // replaced before its colour came
       if (kind_ == Kind::kFile && config_.oni_realtime) {
         // OpenNI's real-time player replaces a frame nobody read by the next one: count the gap
         // (recorded frame indices start at 1).
@@ -505,84 +599,7 @@ FrameRead OpenNi2Source::next(std::chrono::milliseconds timeout) {
       s.last_color_index = frame.getFrameIndex();
       s.pending_color = frame;
     }
-    if (!s.pending_depth.isValid() || (s.has_color && !s.pending_color.isValid())) continue;
-
-    // Pair: with sync on, the two frames carry (nearly) the same device timestamp.
-    const int fps = std::max(1, s.depth.getVideoMode().getFps());
-    const auto half_period_us = static_cast<std::int64_t>(500000 / fps);
-    if (s.has_color) {
-      const auto td = static_cast<std::int64_t>(s.pending_depth.getTimestamp());
-      const auto tc = static_cast<std::int64_t>(s.pending_color.getTimestamp());
-      if (std::llabs(td - tc) > half_period_us) {
-        // The older one has no partner any more: drop it and wait for the next.
-        if (td < tc) {
-          s.pending_depth.release();
-          depthFrameLost();
-        } else {
-          s.pending_color.release();
-        }
-        continue;
-      }
-    }
-    openni::VideoFrameRef depth_frame = s.pending_depth;
-    openni::VideoFrameRef color_frame = s.pending_color;
-    s.pending_depth.release();
-    s.pending_color.release();
-
-    const std::string what =
-        description() + " frame " + std::to_string(depth_frame.getFrameIndex());
-    const int width = depth_frame.getWidth();
-    const int height = depth_frame.getHeight();
-    if (width <= 0 || height <= 0 || depth_frame.getStrideInBytes() < width * 2 ||
-        depth_frame.getDataSize() < depth_frame.getStrideInBytes() * height) {
-      return skipFrame(counters_, kComponent, what + ": depth buffer inconsistent with its size");
-    }
-    auto out = std::make_shared<RgbdFrame>();
-    const cv::Mat raw(height, width, CV_16UC1, const_cast<void*>(depth_frame.getData()),
-                      static_cast<std::size_t>(depth_frame.getStrideInBytes()));
-    out->depth_m = depthRawToMeters(raw, s.depth_scale);
-    if (s.has_color) {
-      const openni::PixelFormat format = color_frame.getVideoMode().getPixelFormat();
-      if (color_frame.getWidth() != width || color_frame.getHeight() != height) {
-        return skipFrame(counters_, kComponent,
-                         what + ": colour is " + std::to_string(color_frame.getWidth()) + "x" +
-                             std::to_string(color_frame.getHeight()) + ", depth is " +
-                             std::to_string(width) + "x" + std::to_string(height));
-      }
-      const int channels = format == openni::PIXEL_FORMAT_RGB888 ? 3 : 1;
-      if (!isColorFormat(format) || color_frame.getStrideInBytes() < width * channels ||
-          color_frame.getDataSize() < color_frame.getStrideInBytes() * height) {
-        return skipFrame(counters_, kComponent,
-                         what + ": colour format " + pixelFormatName(format) +
-                             " or buffer not supported (RGB888 or GRAY8)");
-      }
-      const cv::Mat color(height, width, channels == 3 ? CV_8UC3 : CV_8UC1,
-                          const_cast<void*>(color_frame.getData()),
-                          static_cast<std::size_t>(color_frame.getStrideInBytes()));
-      cv::cvtColor(color, out->color_bgr, channels == 3 ? cv::COLOR_RGB2BGR : cv::COLOR_GRAY2BGR);
-      ensureGray(*out);
-    }
-    const auto device_us = static_cast<std::uint64_t>(depth_frame.getTimestamp());
-    if (kind_ == Kind::kFile) {
-      out->utime = static_cast<Utime>(device_us);
-    } else {
-      if (!s.clock_anchored || device_us < s.first_device_us) {
-        s.clock_anchored = true;
-        s.first_device_us = device_us;
-        s.first_wall_utime = wallClockUtime();
-      }
-      out->utime = s.first_wall_utime + static_cast<Utime>(device_us - s.first_device_us);
-    }
-    out->sequence = depth_frame.getFrameIndex();
-    out->intrinsics = s.device_intrinsics;
-    if (out->intrinsics.width != width || out->intrinsics.height != height) {
-      out->intrinsics = out->intrinsics.scaled(width, height);
-    }
-    out->received_steady_ns = steadyNowNs();
-    const std::string error = gate_.check(*out, what);
-    if (!error.empty()) return skipFrame(counters_, kComponent, error);
-    counters_.frameRead();
-    return FrameRead{FrameRead::Status::kFrame, std::move(out), {}};
+    if (pendingFramesArePaired()) return frameFromPendingPair();
   }
 }
 

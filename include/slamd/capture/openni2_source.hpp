@@ -103,6 +103,17 @@ class OpenNi2Source : public FrameSource {
   struct Impl;  ///< opaque: OpenNI2 types stay out of this header
 
  private:
+  using SteadyTime = std::chrono::steady_clock::time_point;
+  // The steps of next().
+  /// Nothing when the device is open (or was reopened now); a timeout while it stays closed.
+  std::optional<FrameRead> reopenIfDisconnected(SteadyTime deadline);
+  bool reachedEndOfRecording() const;
+  FrameRead declareStalled(SteadyTime now);
+  void countLostDepthFrame();
+  /// Whether the pending depth frame has its colour partner (dropping an unpaired older one).
+  bool pendingFramesArePaired();
+  FrameRead frameFromPendingPair();
+
   Kind kind_;
   std::string uri_;
   OpenNi2Config config_;
