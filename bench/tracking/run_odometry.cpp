@@ -70,7 +70,7 @@ int main(int argc, char** argv) {
   // Thread CPU time per frame: what the work costs on one core, unaffected by other processes
   // competing for the CPU (wall-clock times above include waiting for a core).
   std::vector<double> cpu_ms;
-  int frames = 0, failures = 0, keyframes = 0, lost = 0;
+  int frames = 0, failures = 0, keyframes = 0, lost = 0, implausible = 0;
   double inliers_sum = 0.0;
   while (max_frames <= 0 || frames < max_frames) {
     FrameRead read = source->next(std::chrono::milliseconds(1000));
@@ -87,6 +87,7 @@ int main(int argc, char** argv) {
     if (r.status != OdometryStatus::kOk) ++failures;
     if (r.tracking_state == TrackingState::kLost) ++lost;
     if (r.is_keyframe) ++keyframes;
+    implausible += r.stats.implausible_estimates;
     inliers_sum += r.stats.num_inliers;
     estimate.push_back({utimeToSeconds(r.utime), r.T_world_camera});
   }
@@ -99,6 +100,19 @@ int main(int argc, char** argv) {
   report.set("failed_frames_count", failures);
   report.set("lost_frames_count", lost);
   report.set("keyframes_count", keyframes);
+  // Keyframes per metre of the estimated path and per second of the sequence.
+  double path_m = 0.0;
+  for (std::size_t i = 1; i < estimate.size(); ++i) {
+    path_m +=
+        (estimate[i].T_world_camera.translation() - estimate[i - 1].T_world_camera.translation())
+            .norm();
+  }
+  const double duration_s =
+      estimate.size() > 1 ? estimate.back().timestamp_s - estimate.front().timestamp_s : 0.0;
+  report.set("path_length_m", path_m);
+  report.set("keyframes_per_m", path_m > 0.0 ? keyframes / path_m : 0.0);
+  report.set("keyframes_per_s", duration_s > 0.0 ? keyframes / duration_s : 0.0);
+  report.set("implausible_estimates_count", implausible);
   report.set("mean_inliers_count", frames ? inliers_sum / frames : 0.0);
   report.setLatencySamples("tracking", total_ms);
   report.setLatencySamples("tracking_cpu", cpu_ms);
@@ -106,12 +120,13 @@ int main(int argc, char** argv) {
   report.setLatencySamples("tracking_matching", matching_ms);
   report.setLatencySamples("tracking_motion", motion_ms);
   std::cerr << "frontend " << frontEndName(tracking.frontend) << ": " << frames << " frames, "
-            << failures << " failed, " << keyframes << " keyframes; per frame median "
-            << percentile(total_ms, 50) << " ms, p95 " << percentile(total_ms, 95)
-            << " ms; thread CPU median " << percentile(cpu_ms, 50) << " ms, p95 "
-            << percentile(cpu_ms, 95) << " ms (wall: features " << percentile(features_ms, 50)
-            << ", matching " << percentile(matching_ms, 50) << ", motion "
-            << percentile(motion_ms, 50) << ")\n";
+            << failures << " failed, " << keyframes << " keyframes ("
+            << keyframes / std::max(path_m, 1e-9) << " per m), " << implausible
+            << " estimates vetoed as implausible; per frame median " << percentile(total_ms, 50)
+            << " ms, p95 " << percentile(total_ms, 95) << " ms; thread CPU median "
+            << percentile(cpu_ms, 50) << " ms, p95 " << percentile(cpu_ms, 95)
+            << " ms (wall: features " << percentile(features_ms, 50) << ", matching "
+            << percentile(matching_ms, 50) << ", motion " << percentile(motion_ms, 50) << ")\n";
   if (options.has("trajectory")) {
     try {
       writeTumTrajectory(

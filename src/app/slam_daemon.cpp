@@ -552,6 +552,7 @@ void SlamDaemon::Impl::summarize(const std::vector<StageStats>& stats,
   summary.poses_predicted = tally.predicted.load();
   summary.poses_lost = tally.lost.load();
   summary.poses_not_initialized = tally.not_initialized.load();
+  summary.implausible_estimates = steps->tracking->implausibleEstimates();
   summary.longest_loss_s = tally.longest_loss_s;
   summary.tracking_lost_at_end = tally.loss_start_utime.load() >= 0;
   summary.capture_gaps = tally.capture_gaps;
@@ -625,6 +626,11 @@ void SlamDaemon::Impl::logTrackingSummary() const {
   } else {
     SLAMD_LOG_INFO(kLog) << line.str() << "; tracking OK throughout";
   }
+  if (summary.implausible_estimates > 0) {
+    SLAMD_LOG_WARN(kLog) << "tracking: " << summary.implausible_estimates
+                         << " motion estimates vetoed as beyond the camera's motion limits "
+                            "(filter.max_speed_mps, filter.max_angular_rate_radps), none published";
+  }
   if (summary.capture_gaps > 0) {
     std::ostringstream gaps;
     gaps.precision(2);
@@ -687,6 +693,7 @@ bool SlamDaemon::Impl::writeMetrics(const std::vector<StageStats>& stats) {
   json.key("poses_tracked").value(static_cast<std::int64_t>(summary.poses_tracked));
   json.key("poses_predicted").value(static_cast<std::int64_t>(summary.poses_predicted));
   json.key("poses_lost").value(static_cast<std::int64_t>(summary.poses_lost));
+  json.key("implausible_estimates").value(static_cast<std::int64_t>(summary.implausible_estimates));
   json.key("longest_loss_s").value(summary.longest_loss_s);
   json.key("tracking_lost_at_end").value(summary.tracking_lost_at_end);
   json.key("capture_gaps").value(static_cast<std::int64_t>(summary.capture_gaps));

@@ -89,6 +89,9 @@ std::optional<TrackedPacket> TrackingStep::process(CapturePacket packet) {
     out.odometry = odometry_.processFrame(out.frame);
     tracking_state_.store(static_cast<int>(out.odometry->tracking_state),
                           std::memory_order_relaxed);
+    implausible_estimates_.fetch_add(
+        static_cast<std::uint64_t>(out.odometry->stats.implausible_estimates),
+        std::memory_order_relaxed);
   }
   return out;
 }

@@ -125,6 +125,7 @@ const ConfigSchema<TrackingConfig>& TrackingConfig::schema() {
 TrackingConfig TrackingConfig::load(Config& config) {
   TrackingConfig c;
   schema().load(config, c);
+  c.motion_limits = MotionLimits::load(config);
   if (c.max_depth_m <= c.min_depth_m) {
     throw ConfigError("tracking.max_depth_m (" + std::to_string(c.max_depth_m) +
                       ") must be greater than tracking.min_depth_m (" +

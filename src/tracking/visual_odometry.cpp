@@ -67,6 +67,8 @@ const char* odometryStatusName(OdometryStatus status) {
       return "OPTIMIZATION_FAILURE";
     case OdometryStatus::kNoDepth:
       return "NO_DEPTH";
+    case OdometryStatus::kImplausibleMotion:
+      return "IMPLAUSIBLE_MOTION";
   }
   return "UNKNOWN";
 }
@@ -123,6 +125,8 @@ void VisualOdometry::reset() {
   velocity_prev_curr_ = SE3::Identity();
   have_velocity_ = false;
   failed_frames_ = 0;
+  T_world_last_measured_ = SE3::Identity();
+  last_measured_utime_ = 0;
   prev_small_.release();
   ++segment_;
 }
@@ -299,16 +303,17 @@ void VisualOdometry::matchByDescriptor(const FeatureSet& ref, const CurrentFrame
 
 VisualOdometry::TrackAttempt VisualOdometry::track(const FeatureSet& ref,
                                                    const SE3& T_ref_curr_prior, bool have_prior,
-                                                   const CurrentFrame& curr) {
+                                                   const CurrentFrame& curr, Search search) {
   TrackAttempt a;
   const CameraIntrinsics& K = curr.K;
   std::int64_t t0 = steadyNowNs();
   std::vector<Correspondence> matches;
   if (have_prior) {
-    matchGuided(ref, T_ref_curr_prior, curr, config_.search_radius_px, matches);
+    matchGuided(ref, T_ref_curr_prior, curr, config_.search_radius_px * search.radius_scale,
+                matches);
     a.guided = true;
   }
-  if (static_cast<int>(matches.size()) < config_.min_guided_matches) {
+  if (search.allow_global && static_cast<int>(matches.size()) < config_.min_guided_matches) {
     std::vector<Correspondence> global;
     matchByDescriptor(ref, curr, global);
     if (global.size() > matches.size()) {
@@ -701,6 +706,8 @@ OdometryResult VisualOdometry::startSegment(OdometryResult res, const CurrentFra
   state_ = TrackingState::kOk;
   failed_frames_ = 0;
   have_velocity_ = false;
+  T_world_last_measured_ = T_world_curr;
+  last_measured_utime_ = frame.utime;
   return commit(std::move(res), curr.features, true, t_start);
 }
 
@@ -715,20 +722,46 @@ SE3 VisualOdometry::predictMotion(const cv::Mat& small, const CameraIntrinsics& 
   return motion_prior;
 }
 
+std::string VisualOdometry::implausibility(const SE3& T_world_curr, const Matrix6d& covariance,
+                                           double dt_s) const {
+  const Matrix6d& C = covariance;
+  const double translation_sigma_m = std::sqrt(std::max(0.0, C.topLeftCorner<3, 3>().trace()));
+  const double rotation_sigma_rad = std::sqrt(std::max(0.0, C.bottomRightCorner<3, 3>().trace()));
+  return config_.motion_limits.violation(T_world_last_measured_.inverse() * T_world_curr, dt_s,
+                                         translation_sigma_m, rotation_sigma_rad);
+}
+
 VisualOdometry::ReferenceMeasurement VisualOdometry::measureAgainstReference(
-    const SE3& T_world_pred, const CurrentFrame& curr) {
+    const SE3& T_world_pred, const CurrentFrame& curr, double dt_s, OdometryStats& stats) {
+  // Each reference (the keyframe, then the previous frame) is measured as usual; an estimate
+  // the camera cannot have made is vetoed and that reference retried with guided search only,
+  // in a window twice as wide (whole-image matching is what repeating patterns fool).
   ReferenceMeasurement m;
-  m.attempt =
-      track(keyframe_->features, keyframe_->T_world_camera.inverse() * T_world_pred, true, curr);
+  double matching_ms = 0.0;
+  double motion_ms = 0.0;
+  bool vetoed = false;
+  auto measure = [&](const FeatureSet& ref, const SE3& T_world_ref) {
+    const SE3 prior = T_world_ref.inverse() * T_world_pred;
+    TrackAttempt a = track(ref, prior, true, curr);
+    for (int retry = 0; retry < 2; ++retry) {
+      matching_ms += a.time_matching_ms;
+      motion_ms += a.time_motion_ms;
+      if (a.status != OdometryStatus::kOk) return a;
+      if (implausibility(T_world_ref * a.T_ref_curr, a.covariance, dt_s).empty()) return a;
+      ++stats.implausible_estimates;
+      vetoed = true;
+      a.status = OdometryStatus::kImplausibleMotion;
+      if (retry == 0) a = track(ref, prior, true, curr, Search(false, 2.0));
+    }
+    return a;
+  };
+  m.attempt = measure(keyframe_->features, keyframe_->T_world_camera);
   m.T_world_ref = keyframe_->T_world_camera;
   m.ref_utime = keyframe_->utime;
   m.ref_id = keyframe_->id;
   if (m.attempt.status != OdometryStatus::kOk && prev_features_ && prev_tracked_ &&
       prev_utime_ != keyframe_->utime) {
-    TrackAttempt fallback =
-        track(*prev_features_, T_world_prev_.inverse() * T_world_pred, true, curr);
-    fallback.time_matching_ms += m.attempt.time_matching_ms;
-    fallback.time_motion_ms += m.attempt.time_motion_ms;
+    TrackAttempt fallback = measure(*prev_features_, T_world_prev_);
     if (fallback.status == OdometryStatus::kOk) {
       m.attempt = fallback;
       m.T_world_ref = T_world_prev_;
@@ -737,6 +770,11 @@ VisualOdometry::ReferenceMeasurement VisualOdometry::measureAgainstReference(
       m.from_previous = true;
     }
   }
+  if (m.attempt.status != OdometryStatus::kOk && vetoed) {
+    m.attempt.status = OdometryStatus::kImplausibleMotion;
+  }
+  m.attempt.time_matching_ms = matching_ms;
+  m.attempt.time_motion_ms = motion_ms;
   return m;
 }
 
@@ -847,7 +885,8 @@ OdometryResult VisualOdometry::process(const RgbdFrame& frame, const RgbdFramePt
   }
 
   const SE3 T_world_pred = T_world_prev_ * predictMotion(small, curr.K);
-  ReferenceMeasurement measured = measureAgainstReference(T_world_pred, curr);
+  const double dt_s = static_cast<double>(frame.utime - last_measured_utime_) * 1e-6;
+  ReferenceMeasurement measured = measureAgainstReference(T_world_pred, curr, dt_s, res.stats);
   TrackAttempt& attempt = measured.attempt;
   res.stats.num_matches = attempt.num_matches;
   res.stats.num_inliers = attempt.num_inliers;
@@ -877,6 +916,11 @@ OdometryResult VisualOdometry::process(const RgbdFrame& frame, const RgbdFramePt
   if (!measured.from_previous && config_.jointReferences() > 0) {
     refineInLocalWindow(curr, attempt, T_world_curr, res);
   }
+  // Re-using another keyframe or refining can move the estimate: the veto holds for the result.
+  if (!implausibility(T_world_curr, attempt.covariance, dt_s).empty()) {
+    ++res.stats.implausible_estimates;
+    return fail(std::move(res), OdometryStatus::kImplausibleMotion, curr.features, t_start);
+  }
   if (new_keyframe) addKeyframe(curr, frame, frame_ptr, T_world_curr, res);
 
   res.T_world_camera = T_world_curr;
@@ -887,6 +931,8 @@ OdometryResult VisualOdometry::process(const RgbdFrame& frame, const RgbdFramePt
   last_covariance_ = attempt.covariance;
   failed_frames_ = 0;
   state_ = TrackingState::kOk;
+  T_world_last_measured_ = T_world_curr;
+  last_measured_utime_ = frame.utime;
   return commit(std::move(res), curr.features, true, t_start);
 }
 

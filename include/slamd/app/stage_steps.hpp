@@ -179,10 +179,15 @@ class TrackingStep : public StepBase {
   TrackingState stats() const {
     return static_cast<TrackingState>(tracking_state_.load(std::memory_order_relaxed));
   }
+  /// Motion estimates vetoed by the motion limits so far (any thread).
+  std::uint64_t implausibleEstimates() const {
+    return implausible_estimates_.load(std::memory_order_relaxed);
+  }
 
  private:
   VisualOdometry odometry_;
   std::atomic<int> tracking_state_{static_cast<int>(TrackingState::kNotInitialized)};
+  std::atomic<std::uint64_t> implausible_estimates_{0};
 };
 
 // --- vanishing points (parallel to tracking) ---------------------------------------------------

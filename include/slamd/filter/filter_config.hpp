@@ -7,6 +7,7 @@
 
 #include "slamd/common/config.hpp"
 #include "slamd/common/config_schema.hpp"
+#include "slamd/common/motion_limits.hpp"
 #include "slamd/filter/surface_axes.hpp"
 
 namespace slamd {
@@ -71,8 +72,8 @@ struct FilterConfig {
   /// A lost frame's "unknown" covariance (10 rad sigma) would otherwise leave the rotation about
   /// the vanishing direction, which no vanishing point observes, free to wander by degrees as
   /// later updates relinearise. Ordinary increments are far below the cap.
-  double max_angular_rate_radps = 4.0;
-  double max_speed_mps = 3.0;
+  double max_angular_rate_radps = MotionLimits().max_angular_rate_radps;
+  double max_speed_mps = MotionLimits().max_speed_mps;
   double gate_chi2 = 5.99;  ///< 95% of chi-square with 2 DoF
   double measurement_noise_scale = 1.0;
   int landmark_init_frames = 3;

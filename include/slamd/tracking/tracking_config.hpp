@@ -8,6 +8,7 @@
 
 #include "slamd/common/config.hpp"
 #include "slamd/common/config_schema.hpp"
+#include "slamd/common/motion_limits.hpp"
 
 namespace slamd {
 
@@ -88,6 +89,11 @@ struct TrackingConfig {
   int keyframe_window = 30;
   int max_predicted_frames = 5;
   double failure_sigma_scale = 10.0;
+
+  // --- Plausibility ---------------------------------------------------------------------------
+  /// An estimate implying faster motion is vetoed and tracking retried. Not tracking.* keys:
+  /// load() reads the filter's filter.max_speed_mps and filter.max_angular_rate_radps.
+  MotionLimits motion_limits;
 
   /// The `tracking.*` keys.
   static const ConfigSchema<TrackingConfig>& schema();

@@ -27,6 +27,7 @@
 #include <memory>
 #include <optional>
 #include <random>
+#include <string>
 #include <vector>
 
 #include "slamd/common/pose_estimate.hpp"
@@ -45,6 +46,7 @@ enum class OdometryStatus : std::int8_t {
   kInsufficientInliers = 2,
   kOptimizationFailure = 3,
   kNoDepth = 4,
+  kImplausibleMotion = 5,  ///< every estimate implied motion beyond TrackingConfig::motion_limits
 };
 
 const char* odometryStatusName(OdometryStatus status);
@@ -70,6 +72,7 @@ struct OdometryStats {
   double reprojection_error_px = 0.0;  ///< RMS over the inliers
   bool used_guided_matching = false;
   bool used_previous_frame = false;  ///< the keyframe failed; tracked from the previous frame
+  int implausible_estimates = 0;     ///< estimates vetoed by the motion limits (then retried)
   double time_features_ms = 0.0;     ///< extraction + undistortion + depth
   double time_matching_ms = 0.0;
   double time_motion_ms = 0.0;  ///< RANSAC / clique + refinement
@@ -144,7 +147,12 @@ class VisualOdometry {
                               const RgbdFramePtr& frame_ptr, std::int64_t t_start);
   /// The motion prior since the previous frame; keeps small for the next frame's alignment.
   SE3 predictMotion(const cv::Mat& small, const CameraIntrinsics& K);
-  ReferenceMeasurement measureAgainstReference(const SE3& T_world_pred, const CurrentFrame& curr);
+  ReferenceMeasurement measureAgainstReference(const SE3& T_world_pred, const CurrentFrame& curr,
+                                               double dt_s, OdometryStats& stats);
+  /// Empty when T_world_curr is a motion the camera can make since the previous frame (dt_s
+  /// earlier), given the estimate's covariance; else why not.
+  std::string implausibility(const SE3& T_world_curr, const Matrix6d& covariance,
+                             double dt_s) const;
   bool needsNewKeyframe(const TrackAttempt& attempt, const Keyframe& kf) const;
   /// Measures against a recent keyframe near T_world_curr instead of making a new one; true (and
   /// attempt, T_world_curr and res updated) when one was good enough.
@@ -162,10 +170,18 @@ class VisualOdometry {
                         bool tracked, std::int64_t t_start);
   void matchGuided(const FeatureSet& ref, const SE3& T_ref_curr_prior, const CurrentFrame& curr,
                    double radius_px, std::vector<Correspondence>& matches) const;
+  /// How track() searches: around the prior, falling back to whole-image descriptor matching
+  /// when too few are found; or only around the prior, in a window wider by a factor.
+  struct Search {
+    explicit Search(bool allow_global_matching = true, double window_scale = 1.0)
+        : allow_global(allow_global_matching), radius_scale(window_scale) {}
+    bool allow_global;
+    double radius_scale;
+  };
   void matchByDescriptor(const FeatureSet& ref, const CurrentFrame& curr,
                          std::vector<Correspondence>& matches) const;
   TrackAttempt track(const FeatureSet& ref, const SE3& T_ref_curr_prior, bool have_prior,
-                     const CurrentFrame& curr);
+                     const CurrentFrame& curr, Search search = Search());
   /// Another reference measured jointly with the main one: its features and odometry pose.
   struct ExtraReference {
     const FeatureSet* features = nullptr;
@@ -199,6 +215,9 @@ class VisualOdometry {
   bool have_velocity_ = false;
   Matrix6d last_covariance_ = Matrix6d::Identity() * 1e-6;
   int failed_frames_ = 0;
+  // The last measured frame (not predicted): the plausibility check's reference.
+  SE3 T_world_last_measured_ = SE3::Identity();
+  Utime last_measured_utime_ = 0;
   cv::Mat prev_small_;  ///< blurred 80x60 image of the previous frame (FOVIS rotation alignment)
 };
 
