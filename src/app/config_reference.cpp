@@ -36,6 +36,7 @@ std::vector<ConfigKeyDescription> allKeys() {
   append(ChannelConfig::schema().describe());
   append(TrackingConfig::schema().describe());
   append(FilterConfig::schema().describe());
+  append(MotionLimits::schema().describe());
   append(VanishingPointConfig::schema().describe());
   append(SurfaceAxesConfig::schema().describe());
   append(MappingConfig::schema().describe());

@@ -6,13 +6,22 @@
 
 namespace slamd {
 
+const ConfigSchema<MotionLimits>& MotionLimits::schema() {
+  using C = MotionLimits;
+  static const auto table =
+      ConfigSchema<C>("filter")
+          .number("max_angular_rate_radps", &C::max_angular_rate_radps, 0.01, 100.0, "rad/s",
+                  "how fast the camera can turn: tracking vetoes an estimate that implies more "
+                  "(beyond 3 sigma of its own noise), and the filter caps an increment's rotation "
+                  "variance at (limit * dt)^2 per axis")
+          .number("max_speed_mps", &C::max_speed_mps, 0.01, 100.0, "m/s",
+                  "how fast the camera can move: the same veto and cap for the translation");
+  return table;
+}
+
 MotionLimits MotionLimits::load(Config& config) {
   MotionLimits limits;
-  // The ranges are FilterConfig's (filter/filter_config.cpp), which loads the same keys.
-  limits.max_speed_mps =
-      config.getDouble("filter.max_speed_mps", limits.max_speed_mps, 0.01, 100.0);
-  limits.max_angular_rate_radps =
-      config.getDouble("filter.max_angular_rate_radps", limits.max_angular_rate_radps, 0.01, 100.0);
+  schema().load(config, limits);
   return limits;
 }
 

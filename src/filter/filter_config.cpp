@@ -106,11 +106,6 @@ const ConfigSchema<FilterConfig>& FilterConfig::schema() {
                   "positive semi-definite (counted)")
           .number("fallback_rotation_sigma_rad", &C::fallback_rotation_sigma_rad, 1e-6, 3.0, "rad",
                   "the same for the rotation")
-          .number("max_angular_rate_radps", &C::max_angular_rate_radps, 0.01, 100.0, "rad/s",
-                  "how fast the camera can turn: an increment's rotation variance is capped at "
-                  "(limit * dt)^2 per axis")
-          .number("max_speed_mps", &C::max_speed_mps, 0.01, 100.0, "m/s",
-                  "how fast the camera can move: the same cap for the translation")
           .number("gate_chi2", &C::gate_chi2, 0.1, 1000.0, "",
                   "Mahalanobis gate on the 2-DoF vanishing-point innovation")
           .number("measurement_noise_scale", &C::measurement_noise_scale, 0.01, 1e4, "",
@@ -159,6 +154,7 @@ FilterConfig FilterConfig::load(Config& config) {
   schema().load(config, c);
   c.axes = SurfaceAxesConfig::load(config);
   c.vp = VanishingPointConfig::load(config);
+  c.motion_limits = MotionLimits::load(config);
   return c;
 }
 

@@ -205,8 +205,8 @@ Eigen::Vector3d PoseEkf::directionFromAxis(const Eigen::Matrix3d& R_world_camera
 // --- prediction --------------------------------------------------------------------------------
 
 bool PoseEkf::capAtMotionLimits(double dt_s, Matrix6d* Q_odometry) const {
-  const double max_translation_m = config_.max_speed_mps * dt_s;
-  const double max_rotation_rad = config_.max_angular_rate_radps * dt_s;
+  const double max_translation_m = config_.motion_limits.max_speed_mps * dt_s;
+  const double max_rotation_rad = config_.motion_limits.max_angular_rate_radps * dt_s;
   Vector6d scale = Vector6d::Ones();
   for (int i = 0; i < 6; ++i) {
     const double limit = i < 3 ? max_translation_m : max_rotation_rad;

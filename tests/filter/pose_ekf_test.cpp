@@ -472,8 +472,8 @@ TEST(PoseEkf, LostFrameCovarianceIsCappedAtTheMotionLimits) {
   FilterConfig config;
   config.translation_noise_m_per_sqrt_s = 0.0;
   config.rotation_noise_rad_per_sqrt_s = 0.0;
-  config.max_speed_mps = 3.0;
-  config.max_angular_rate_radps = 4.0;
+  config.motion_limits.max_speed_mps = 3.0;
+  config.motion_limits.max_angular_rate_radps = 4.0;
   const CameraIntrinsics K;
   PoseEkf ekf(config, K);
   ekf.reset(SE3::Identity(), Matrix6d::Zero());

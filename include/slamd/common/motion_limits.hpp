@@ -1,12 +1,13 @@
 #pragma once
 // MotionLimits: how fast the camera can physically move. Tracking vetoes an estimate that implies
 // more (a flip found by matching a repeating pattern), the filter caps its increments' variance at
-// it. The keys are filter.max_speed_mps and filter.max_angular_rate_radps: FilterConfig's schema
-// documents and validates them; MotionLimits::load reads the same two keys for other stages.
+// it. The keys are filter.max_speed_mps and filter.max_angular_rate_radps (rows of this struct's
+// schema, in the filter's area); FilterConfig and TrackingConfig each load a copy.
 
 #include <string>
 
 #include "slamd/common/config.hpp"
+#include "slamd/common/config_schema.hpp"
 #include "slamd/common/se3.hpp"
 
 namespace slamd {
@@ -15,8 +16,9 @@ struct MotionLimits {
   double max_speed_mps = 3.0;
   double max_angular_rate_radps = 4.0;
 
-  /// Reads filter.max_speed_mps and filter.max_angular_rate_radps (defaults above). Throws
-  /// ConfigError when out of range.
+  /// The `filter.max_speed_mps` and `filter.max_angular_rate_radps` keys.
+  static const ConfigSchema<MotionLimits>& schema();
+  /// Reads them (defaults above). Throws ConfigError when out of range.
   static MotionLimits load(Config& config);
 
   /// Empty when the motion T_prev_curr over dt_s seconds is within the limits, else a sentence

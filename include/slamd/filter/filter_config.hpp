@@ -72,8 +72,8 @@ struct FilterConfig {
   /// A lost frame's "unknown" covariance (10 rad sigma) would otherwise leave the rotation about
   /// the vanishing direction, which no vanishing point observes, free to wander by degrees as
   /// later updates relinearise. Ordinary increments are far below the cap.
-  double max_angular_rate_radps = MotionLimits().max_angular_rate_radps;
-  double max_speed_mps = MotionLimits().max_speed_mps;
+  /// filter.max_angular_rate_radps, filter.max_speed_mps (MotionLimits' schema rows).
+  MotionLimits motion_limits;
   double gate_chi2 = 5.99;  ///< 95% of chi-square with 2 DoF
   double measurement_noise_scale = 1.0;
   int landmark_init_frames = 3;
