@@ -19,8 +19,12 @@ std::ofstream openList(const std::filesystem::path& path, const std::string& wha
   return file;
 }
 
-void writePng(const std::filesystem::path& path, const cv::Mat& image) {
-  const std::vector<int> params = {cv::IMWRITE_PNG_COMPRESSION, 1};
+void writeImage(const std::filesystem::path& path, const cv::Mat& image, TumImageFormat format) {
+  // PNG at zlib level 1: level 9 saves a few percent on noisy rendered images at many times the
+  // time. PPM/PGM are always binary (P6/P5), OpenCV's default.
+  const std::vector<int> params = format == TumImageFormat::kPng
+                                      ? std::vector<int>{cv::IMWRITE_PNG_COMPRESSION, 1}
+                                      : std::vector<int>{cv::IMWRITE_PXM_BINARY, 1};
   bool ok = false;
   try {
     ok = cv::imwrite(path.string(), image, params);
@@ -41,8 +45,11 @@ std::string formatTumTimestamp(Utime utime) {
 }
 
 TumSequenceWriter::TumSequenceWriter(std::string folder, std::string description,
-                                     double depth_scale)
-    : folder_(std::move(folder)), description_(std::move(description)), depth_scale_(depth_scale) {
+                                     double depth_scale, TumImageFormat format)
+    : folder_(std::move(folder)),
+      description_(std::move(description)),
+      depth_scale_(depth_scale),
+      format_(format) {
   if (!(depth_scale_ > 0.0)) throw std::invalid_argument("depth scale must be positive");
 }
 
@@ -68,10 +75,11 @@ void TumSequenceWriter::write(const RgbdFrame& frame) {
   }
   const std::string stamp = formatTumTimestamp(frame.utime);
   const std::filesystem::path root(folder_);
-  const std::string rgb_name = "rgb/" + stamp + ".png";
-  const std::string depth_name = "depth/" + stamp + ".png";
-  writePng(root / rgb_name, frame.color_bgr);
-  writePng(root / depth_name, depthMetersToRaw(frame.depth_m, depth_scale_));
+  const bool png = format_ == TumImageFormat::kPng;
+  const std::string rgb_name = "rgb/" + stamp + (png ? ".png" : ".ppm");
+  const std::string depth_name = "depth/" + stamp + (png ? ".png" : ".pgm");
+  writeImage(root / rgb_name, frame.color_bgr, format_);
+  writeImage(root / depth_name, depthMetersToRaw(frame.depth_m, depth_scale_), format_);
   rgb_list_ << stamp << " " << rgb_name << "\n";
   depth_list_ << stamp << " " << depth_name << "\n";
   if (!rgb_list_ || !depth_list_)

@@ -143,13 +143,14 @@ TEST(SyntheticSource, ABlackoutCoversExactlyTheFramesInItsInterval) {
   EXPECT_EQ(source->groundTruth()->size(), static_cast<std::size_t>(source->frameCount()));
 }
 
-TEST(SyntheticSource, AWrittenSequenceReadBackByTheTumSourceGivesIdenticalFramesAndPoses) {
+// Writes five corridor frames as a TUM folder in `format` and reads them back with TumSource.
+void expectTumFolderReadsBackIdentically(TumImageFormat format) {
   const test::ScopedTempDir dir("synth-tum");
   auto source = test::makeSyntheticSource("corridor", {"synthetic.frames=5"});
   const Trajectory gt = *source->groundTruth();
   std::vector<RgbdFramePtr> written;
   {
-    TumSequenceWriter writer(dir.string(), "test");
+    TumSequenceWriter writer(dir.string(), "test", 5000.0, format);
     writer.open();
     source->open();
     for (FrameRead read = source->next(std::chrono::milliseconds(100));
@@ -199,6 +200,14 @@ TEST(SyntheticSource, AWrittenSequenceReadBackByTheTumSourceGivesIdenticalFrames
                                gt[i].T_world_camera.linear()),
               1e-8);
   }
+}
+
+TEST(SyntheticSource, AWrittenSequenceReadBackByTheTumSourceGivesIdenticalFramesAndPoses) {
+  expectTumFolderReadsBackIdentically(TumImageFormat::kPng);
+}
+
+TEST(SyntheticSource, AnUncompressedSequenceReadsBackAsIdenticallyAsPng) {
+  expectTumFolderReadsBackIdentically(TumImageFormat::kUncompressed);
 }
 
 TEST(TumSequenceWriter, WritesTimestampsAsTheBenchmarkDoes) {

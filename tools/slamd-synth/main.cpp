@@ -3,6 +3,7 @@
 //
 //   slamd-synth --scene corridor --trajectory zigzag --frames 300 --seed 42 --out /tmp/corridor
 //   slamd-synth --scene room --out /tmp/room --set synthetic.sensor.exact=true
+//   slamd-synth --scene room --out /tmp/room --images uncompressed   # for real-time replay
 //
 // --scene/--trajectory/--frames/--seed set synthetic.* and win over --config and --set.
 // Frames are rendered --threads at a time (default: one per core) and written in order.
@@ -32,6 +33,8 @@ int main(int argc, char** argv) {
   options.addOption("seed", "S", "seed of the scene, motion and sensor noise");
   options.addOption("out", "DIR", "output folder (created)");
   options.addOption("threads", "N", "frames rendered at once (default: the machine's cores)");
+  options.addOption("images", "FORMAT",
+                    "png | uncompressed (PPM/PGM: larger, but cheap to read in real time)", "png");
   if (!options.parse(argc, argv)) return options.exitCode();
   if (!options.has("out")) {
     std::cerr << "slamd-synth: --out DIR is required\n" << options.usage();
@@ -39,6 +42,13 @@ int main(int argc, char** argv) {
   }
   const std::string scene = options.value("scene");
   const std::string out = options.value("out");
+  const std::string images = options.value("images");
+  if (images != "png" && images != "uncompressed") {
+    std::cerr << "slamd-synth: --images " << images << " is not png or uncompressed\n";
+    return kExitUsage;
+  }
+  const TumImageFormat image_format =
+      images == "png" ? TumImageFormat::kPng : TumImageFormat::kUncompressed;
   int threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
   if (options.has("threads")) {
     try {
@@ -74,7 +84,7 @@ int main(int argc, char** argv) {
     // camera.depth_scale (default 5000, the TUM factor) so that the same configuration reads the
     // folder back with `tum:DIR`.
     TumSequenceWriter writer(out, "slamd-synth " + source->description(),
-                             source->config().camera.depth_scale);
+                             source->config().camera.depth_scale, image_format);
     writer.open();
     // Frames depend only on their index: render `threads` of them at once, write them in order.
     std::deque<std::future<RgbdFramePtr>> rendering;
