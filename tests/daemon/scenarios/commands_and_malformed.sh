@@ -71,3 +71,4 @@ stop_process $PLAY_PID
 kill -INT $SLAMD_PID
 wait $SLAMD_PID || fail "slamd exited with $? at SIGINT"
 check "slamd exited 0"
+stop_process $POSE_LOG_PID

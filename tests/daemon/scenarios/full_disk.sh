@@ -18,7 +18,7 @@ private_network
 cd "$WORK"
 mkdir -p disk
 mount -t tmpfs -o size=4m slamd-full-disk disk || fail "cannot mount a tmpfs"
-trap 'umount -l "$WORK/disk" 2> /dev/null || true' EXIT
+trap 'stop_background_jobs; umount -l "$WORK/disk" 2> /dev/null || true' EXIT
 "$SLAMD_BIN/slamd" --config "$SLAMD_SOURCE_DIR/config/synthetic.yaml" --log-level info \
   "${SMALL_CAMERA[@]}" --source synthetic:room --set synthetic.frames=450 \
   --set capture.pacing.mode=realtime --set mapping.snapshot_path="$WORK/disk/snapshot.bt" \

@@ -3,6 +3,21 @@
 # Environment from the test: SLAMD_BIN (build/bin), SLAMD_SOURCE_DIR, WORK (empty temp dir).
 set -euo pipefail
 
+# Every client and daemon a scenario starts in the background is stopped when the scenario ends,
+# passed or failed: SIGTERM, then SIGKILL after 5 s. Without this a scenario that ends without
+# stopping one (or fails first) leaves it running, orphaned, for as long as the machine runs.
+stop_background_jobs() {
+  local pids
+  pids=$(jobs -pr)
+  [ -n "$pids" ] || return 0
+  kill -TERM $pids 2> /dev/null || true
+  local deadline=$((SECONDS + 5))
+  while [ $SECONDS -lt $deadline ] && kill -0 $pids 2> /dev/null; do sleep 0.05; done
+  kill -KILL $pids 2> /dev/null || true
+  wait $pids 2> /dev/null || true
+}
+trap stop_background_jobs EXIT
+
 private_network() {
   ip link set lo up
   ip route add 224.0.0.0/4 dev lo
