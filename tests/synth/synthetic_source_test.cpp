@@ -2,6 +2,7 @@
 
 #include <cstring>
 #include <filesystem>
+#include <utility>
 
 #include <gtest/gtest.h>
 
@@ -162,6 +163,17 @@ void expectTumFolderReadsBackIdentically(TumImageFormat format) {
     writer.finish(gt);
   }
   ASSERT_EQ(written.size(), 5u);
+  // The images are in the format asked for (TumSource reads either).
+  for (const auto& [list, extension] :
+       {std::pair{"rgb", format == TumImageFormat::kPng ? ".png" : ".ppm"},
+        std::pair{"depth", format == TumImageFormat::kPng ? ".png" : ".pgm"}}) {
+    int images = 0;
+    for (const auto& entry : std::filesystem::directory_iterator(dir.path() / list)) {
+      EXPECT_EQ(entry.path().extension().string(), extension) << entry.path();
+      ++images;
+    }
+    EXPECT_EQ(images, 5) << list;
+  }
 
   Config config;
   TumSource tum(dir.string(), TumSourceConfig::load(config));

@@ -14,9 +14,8 @@
 // frame). Depth is rounded to the nearest 1/5000 m (0.2 mm). One thread owns a writer.
 //
 // TumImageFormat::kUncompressed writes the same pixels as binary PPM (colour) and 16-bit PGM
-// (depth) instead of PNG: about 1.5 MB a frame instead of about 0.7 MB, but read back with a copy
-// rather than inflate. PNG decoding of a rendered 640x480 frame costs more CPU than tracking it on
-// a 2-core machine, so folders meant to be replayed in real time are written uncompressed.
+// (depth) instead of PNG: about twice the bytes, but read back with a copy rather than inflate,
+// for folders replayed in real time, where decoding competes with tracking for the CPU.
 
 #include <fstream>
 #include <string>
