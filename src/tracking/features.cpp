@@ -1,6 +1,7 @@
 #include "slamd/tracking/features.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 
@@ -14,28 +15,34 @@ namespace {
 constexpr int kPatchSize = 9;  // FOVIS patch descriptor: 9x9 pixels
 constexpr int kPatchHalf = kPatchSize / 2;
 
-/// Sub-pixel refinement of level-0 corners (others keep their position).
-void refineSubpixel(const cv::Mat& gray, std::vector<cv::KeyPoint>& keypoints) {
-  std::vector<cv::Point2f> corners;
-  std::vector<int> index;
-  const int margin = 4;
-  for (std::size_t i = 0; i < keypoints.size(); ++i) {
-    const cv::Point2f& p = keypoints[i].pt;
-    if (keypoints[i].octave == 0 && p.x >= margin && p.y >= margin &&
-        p.x < static_cast<float>(gray.cols - margin) &&
-        p.y < static_cast<float>(gray.rows - margin)) {
-      corners.push_back(p);
-      index.push_back(static_cast<int>(i));
+/// The kSide x kSide bilinear samples of a CV_8UC1 image around (x, y), row by row: sample (i, j)
+/// at (x - kSide / 2 + i, y - kSide / 2 + j). All of them lie at integer offsets from (x, y), so
+/// one set of weights serves them all. The caller keeps the samples inside the image.
+template <int kSide>
+void sampleSquare(const cv::Mat& image, double x, double y, double (&out)[kSide * kSide]) {
+  const double fx = std::floor(x), fy = std::floor(y);
+  const double ax = x - fx, ay = y - fy;
+  const int x0 = static_cast<int>(fx) - kSide / 2, y0 = static_cast<int>(fy) - kSide / 2;
+  for (int row = 0; row < kSide; ++row) {
+    const std::uint8_t* r0 = image.ptr<std::uint8_t>(y0 + row) + x0;
+    const std::uint8_t* r1 = image.ptr<std::uint8_t>(y0 + row + 1) + x0;
+    double* samples = out + row * kSide;
+    for (int col = 0; col < kSide; ++col) {
+      samples[col] = (1 - ay) * ((1 - ax) * r0[col] + ax * r0[col + 1]) +
+                     ay * ((1 - ax) * r1[col] + ax * r1[col + 1]);
     }
   }
-  if (corners.empty()) return;
-  cv::cornerSubPix(gray, corners, cv::Size(2, 2), cv::Size(-1, -1),
-                   cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 6, 0.02));
-  for (std::size_t k = 0; k < corners.size(); ++k) {
-    cv::KeyPoint& kp = keypoints[static_cast<std::size_t>(index[k])];
-    // cornerSubPix can wander on edges; keep moves within one pixel.
-    if (std::abs(corners[k].x - kp.pt.x) < 1.0f && std::abs(corners[k].y - kp.pt.y) < 1.0f) {
-      kp.pt = corners[k];
+}
+
+/// Sub-pixel refinement of level-0 corners (others keep their position).
+void refineSubpixel(const cv::Mat& gray, std::vector<cv::KeyPoint>& keypoints) {
+  for (cv::KeyPoint& kp : keypoints) {
+    if (kp.octave != 0) continue;
+    cv::Point2f refined;
+    // The refinement can wander along edges; keep moves within one pixel.
+    if (refineCorner(gray, kp.pt, refined) && std::abs(refined.x - kp.pt.x) < 1.0f &&
+        std::abs(refined.y - kp.pt.y) < 1.0f) {
+      kp.pt = refined;
     }
   }
 }
@@ -236,6 +243,58 @@ class FovisExtractor : public FeatureExtractor {
 
 }  // namespace
 
+bool refineCorner(const cv::Mat& gray, const cv::Point2f& initial, cv::Point2f& refined) {
+  constexpr int kHalf = 2;              // 5x5 window of gradients
+  constexpr int kSide = 2 * kHalf + 3;  // 7x7 samples: the window and a ring for the gradients
+  constexpr double kSigmaPx = kHalf * 0.70710678118654752;  // window / sqrt(2), as cornerSubPix
+  constexpr double kMinStepSq = 0.02 * 0.02;
+  static const auto weights = [] {
+    std::array<double, (2 * kHalf + 1) * (2 * kHalf + 1)> w{};
+    for (int dy = -kHalf; dy <= kHalf; ++dy) {
+      for (int dx = -kHalf; dx <= kHalf; ++dx) {
+        w[static_cast<std::size_t>((dy + kHalf) * (2 * kHalf + 1) + dx + kHalf)] =
+            std::exp(-(dx * dx + dy * dy) / (2.0 * kSigmaPx * kSigmaPx));
+      }
+    }
+    return w;
+  }();
+  if (gray.type() != CV_8UC1) return false;
+  double px = initial.x, py = initial.y;
+  for (int it = 0; it < 6; ++it) {
+    const int x0 = static_cast<int>(std::floor(px)) - kHalf - 1;
+    const int y0 = static_cast<int>(std::floor(py)) - kHalf - 1;
+    if (x0 < 0 || y0 < 0 || x0 + kSide >= gray.cols || y0 + kSide >= gray.rows) return false;
+    double samples[kSide * kSide];
+    sampleSquare<kSide>(gray, px, py, samples);
+    // Normal equations in the offset d from (px, py): sum w g g^T d = sum w g g^T x.
+    double a00 = 0, a01 = 0, a11 = 0, b0 = 0, b1 = 0;
+    std::size_t k = 0;
+    for (int dy = -kHalf; dy <= kHalf; ++dy) {
+      for (int dx = -kHalf; dx <= kHalf; ++dx, ++k) {
+        const int sx = dx + kHalf + 1, sy = dy + kHalf + 1;
+        const double gx = 0.5 * (samples[sy * kSide + sx + 1] - samples[sy * kSide + sx - 1]);
+        const double gy = 0.5 * (samples[(sy + 1) * kSide + sx] - samples[(sy - 1) * kSide + sx]);
+        const double w = weights[k];
+        const double gxx = w * gx * gx, gxy = w * gx * gy, gyy = w * gy * gy;
+        a00 += gxx;
+        a01 += gxy;
+        a11 += gyy;
+        b0 += gxx * dx + gxy * dy;
+        b1 += gxy * dx + gyy * dy;
+      }
+    }
+    const double det = a00 * a11 - a01 * a01;
+    if (!(det > 1e-6 * (a00 + a11) * (a00 + a11)) || a00 + a11 < 1.0) return false;
+    const double step_x = (a11 * b0 - a01 * b1) / det;
+    const double step_y = (a00 * b1 - a01 * b0) / det;
+    px += step_x;
+    py += step_y;
+    if (step_x * step_x + step_y * step_y < kMinStepSq) break;
+  }
+  refined = cv::Point2f(static_cast<float>(px), static_cast<float>(py));
+  return true;
+}
+
 std::unique_ptr<FeatureExtractor> makeFeatureExtractor(const TrackingConfig& config) {
   switch (config.frontend) {
     case FrontEndType::kSift:
@@ -301,8 +360,9 @@ bool alignPatch(const cv::Mat& templ, const cv::Point2f& templ_px, const cv::Mat
   auto warp = [&ref_from_curr](double dx, double dy, double& rx, double& ry) {
     const double w = ref_from_curr(2, 0) * dx + ref_from_curr(2, 1) * dy + ref_from_curr(2, 2);
     if (!(w > 0.0)) return false;
-    rx = (ref_from_curr(0, 0) * dx + ref_from_curr(0, 1) * dy + ref_from_curr(0, 2)) / w;
-    ry = (ref_from_curr(1, 0) * dx + ref_from_curr(1, 1) * dy + ref_from_curr(1, 2)) / w;
+    const double inverse_w = 1.0 / w;
+    rx = (ref_from_curr(0, 0) * dx + ref_from_curr(0, 1) * dy + ref_from_curr(0, 2)) * inverse_w;
+    ry = (ref_from_curr(1, 0) * dx + ref_from_curr(1, 1) * dy + ref_from_curr(1, 2)) * inverse_w;
     return true;
   };
   // The warped template reaches further than kHalf + 1 when ref_from_curr magnifies; the image of
@@ -333,62 +393,54 @@ bool alignPatch(const cv::Mat& templ, const cv::Point2f& templ_px, const cv::Mat
       t[dy + kHalf + 1][dx + kHalf + 1] = sample(templ, tx0 + rx, ty0 + ry);
     }
   }
-  double gx[kSide][kSide], gy[kSide][kSide], tv[kSide][kSide];
-  double t_mean = 0.0;
+  // Zero-mean template and zero-mean gradients (a brightness offset is eliminated by mean
+  // subtraction, so the gradients are centred too), stored flat for the loops below.
+  constexpr int kCount = kSide * kSide;
+  double gx[kCount], gy[kCount], tc[kCount];
+  double t_mean = 0.0, gx_mean = 0.0, gy_mean = 0.0;
+  for (int y = 0; y < kSide; ++y) {
+    for (int x = 0; x < kSide; ++x) {
+      const int k = y * kSide + x;
+      gx[k] = 0.5 * (t[y + 1][x + 2] - t[y + 1][x]);
+      gy[k] = 0.5 * (t[y + 2][x + 1] - t[y][x + 1]);
+      tc[k] = t[y + 1][x + 1];
+      t_mean += tc[k];
+      gx_mean += gx[k];
+      gy_mean += gy[k];
+    }
+  }
+  t_mean /= kCount;
+  gx_mean /= kCount;
+  gy_mean /= kCount;
   double h00 = 0, h01 = 0, h11 = 0;
-  for (int y = 0; y < kSide; ++y) {
-    for (int x = 0; x < kSide; ++x) {
-      gx[y][x] = 0.5 * (t[y + 1][x + 2] - t[y + 1][x]);
-      gy[y][x] = 0.5 * (t[y + 2][x + 1] - t[y][x + 1]);
-      tv[y][x] = t[y + 1][x + 1];
-      t_mean += tv[y][x];
-    }
-  }
-  t_mean /= kSide * kSide;
-  double gx_mean = 0, gy_mean = 0;
-  for (int y = 0; y < kSide; ++y) {
-    for (int x = 0; x < kSide; ++x) {
-      gx_mean += gx[y][x];
-      gy_mean += gy[y][x];
-    }
-  }
-  gx_mean /= kSide * kSide;
-  gy_mean /= kSide * kSide;
-  // With a brightness offset eliminated by mean subtraction, the gradients are centred too.
-  for (int y = 0; y < kSide; ++y) {
-    for (int x = 0; x < kSide; ++x) {
-      const double cx = gx[y][x] - gx_mean, cy = gy[y][x] - gy_mean;
-      h00 += cx * cx;
-      h01 += cx * cy;
-      h11 += cy * cy;
-    }
+  double gx_t = 0, gy_t = 0;  // gradient . zero-mean template
+  for (int k = 0; k < kCount; ++k) {
+    gx[k] -= gx_mean;
+    gy[k] -= gy_mean;
+    tc[k] -= t_mean;
+    h00 += gx[k] * gx[k];
+    h01 += gx[k] * gy[k];
+    h11 += gy[k] * gy[k];
+    gx_t += gx[k] * tc[k];
+    gy_t += gy[k] * tc[k];
   }
   const double det = h00 * h11 - h01 * h01;
   if (det < 1e-6 * (h00 + h11) * (h00 + h11) || h00 + h11 < 1.0) return false;
+  // Gauss-Newton on the patch position. The gradients sum to zero, so the image's mean drops out of
+  // the gradient products.
   double px = initial_px.x, py = initial_px.y;
   bool converged = false;
-  double last[kSide][kSide];
-  double last_mean = 0.0;
+  double iv[kCount];
   for (int it = 0; it < 10; ++it) {
     if (!inside(image, px, py)) return false;
-    double(&iv)[kSide][kSide] = last;
-    double& i_mean = last_mean;
-    i_mean = 0.0;
-    for (int y = 0; y < kSide; ++y) {
-      for (int x = 0; x < kSide; ++x) {
-        iv[y][x] = sample(image, px + x - kHalf, py + y - kHalf);
-        i_mean += iv[y][x];
-      }
-    }
-    i_mean /= kSide * kSide;
+    sampleSquare<kSide>(image, px, py, iv);
     double b0 = 0, b1 = 0;
-    for (int y = 0; y < kSide; ++y) {
-      for (int x = 0; x < kSide; ++x) {
-        const double e = (iv[y][x] - i_mean) - (tv[y][x] - t_mean);
-        b0 += (gx[y][x] - gx_mean) * e;
-        b1 += (gy[y][x] - gy_mean) * e;
-      }
+    for (int k = 0; k < kCount; ++k) {
+      b0 += gx[k] * iv[k];
+      b1 += gy[k] * iv[k];
     }
+    b0 -= gx_t;
+    b1 -= gy_t;
     const double dx = (h11 * b0 - h01 * b1) / det;
     const double dy = (h00 * b1 - h01 * b0) / det;
     px -= dx;
@@ -401,14 +453,15 @@ bool alignPatch(const cv::Mat& templ, const cv::Point2f& templ_px, const cv::Mat
   if (!converged || !inside(image, px, py)) return false;
   // Accept only a patch that really looks like the template (zero-mean normalised correlation,
   // on the last iteration's samples, a hundredth of a pixel away).
+  double i_mean = 0.0;
+  for (int k = 0; k < kCount; ++k) i_mean += iv[k];
+  i_mean /= kCount;
   double sit = 0, sii = 0, stt = 0;
-  for (int y = 0; y < kSide; ++y) {
-    for (int x = 0; x < kSide; ++x) {
-      const double a = last[y][x] - last_mean, b = tv[y][x] - t_mean;
-      sit += a * b;
-      sii += a * a;
-      stt += b * b;
-    }
+  for (int k = 0; k < kCount; ++k) {
+    const double a = iv[k] - i_mean;
+    sit += a * tc[k];
+    sii += a * a;
+    stt += tc[k] * tc[k];
   }
   if (sii <= 0.0 || stt <= 0.0 || sit / std::sqrt(sii * stt) < kMinCorrelation) return false;
   if (std::hypot(px - static_cast<double>(initial_px.x), py - static_cast<double>(initial_px.y)) >

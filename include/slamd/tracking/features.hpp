@@ -75,6 +75,13 @@ std::vector<Eigen::Vector2d> undistortPixels(const std::vector<cv::Point2f>& raw
                                              const CameraIntrinsics& intrinsics,
                                              const TrackingConfig& config);
 
+/// The corner position near `initial` in a CV_8UC1 image (Foerstner): the point that every
+/// gradient in a 5x5 window points at or away from, minimising the Gaussian-weighted sum of
+/// (g . (x - p))^2 over the window's pixels x with gradients g. The window follows the estimate
+/// (at most 6 times, until it moves less than 0.02 px). Returns false when the window leaves the
+/// image or the gradients do not fix a point (an edge or a flat patch).
+bool refineCorner(const cv::Mat& gray, const cv::Point2f& initial, cv::Point2f& refined);
+
 /// Sub-pixel alignment of a square patch (translation plus brightness offset, inverse
 /// compositional Lucas-Kanade): the position in `image` (raw pixels) of the patch of `templ`
 /// centred at templ_px, starting from initial_px. Returns false when it does not converge or
