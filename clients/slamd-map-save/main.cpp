@@ -19,36 +19,6 @@
 #include "slamd/comms/map_codec.hpp"
 #include "slamd/mapping/map_io.hpp"
 
-namespace {
-
-bool endsWith(const std::string& text, const std::string& suffix) {
-  return text.size() >= suffix.size() &&
-         text.compare(text.size() - suffix.size(), suffix.size(), suffix) == 0;
-}
-
-bool writeTree(const octomap::OcTree& tree, const std::string& path, std::string* error) {
-  const bool full = endsWith(path, ".ot");
-  if (!full && !endsWith(path, ".bt")) {
-    if (error) *error = "'" + path + "': the map file must end in .bt or .ot";
-    return false;
-  }
-  return slamd::writeFileAtomically(
-      path, [&](std::ostream& out) { return full ? tree.write(out) : tree.writeBinaryConst(out); },
-      error);
-}
-
-slamd::PointCloud occupiedCentres(const octomap::OcTree& tree) {
-  slamd::PointCloud cloud;
-  for (auto it = tree.begin_leafs(); it != tree.end_leafs(); ++it) {
-    if (!tree.isNodeOccupied(*it)) continue;
-    const octomap::point3d c = it.getCoordinate();
-    cloud.points.emplace_back(c.x(), c.y(), c.z());
-  }
-  return cloud;
-}
-
-}  // namespace
-
 int main(int argc, char** argv) {
   using namespace slamd;
   ShutdownSignals signals;
@@ -138,7 +108,7 @@ int main(int argc, char** argv) {
     int exit_code = kExitOk;
     std::string error;
     if (options.has("out")) {
-      if (writeTree(replica.tree(), options.value("out"), &error)) {
+      if (writeOcTreeFile(replica.tree(), options.value("out"), &error)) {
         std::cerr << "slamd-map-save: map written to " << options.value("out") << "\n";
       } else {
         std::cerr << "slamd-map-save: " << error << "\n";
@@ -146,7 +116,7 @@ int main(int argc, char** argv) {
       }
     }
     if (options.has("ply")) {
-      const PointCloud cloud = occupiedCentres(replica.tree());
+      const PointCloud cloud = occupiedVoxelCentres(replica.tree());
       if (writeFileAtomically(
               options.value("ply"),
               [&](std::ostream& out) { return writePly(out, cloud, PlyFormat::kBinary); },

@@ -6,7 +6,6 @@
 // Lines are written as poses arrive (flushed every second), so a killed logger keeps what it saw.
 // Malformed messages are counted and reported at exit; they never stop the logger.
 
-#include <cstdio>
 #include <fstream>
 #include <iostream>
 #include <mutex>
@@ -18,24 +17,6 @@
 #include "slamd/comms/channels.hpp"
 #include "slamd/comms/lcm_bus.hpp"
 #include "slamd/comms/pose_codec.hpp"
-
-namespace {
-
-std::string csvLine(const slamd::PoseEstimate& pose) {
-  const Eigen::Vector3d t = pose.T_world_camera.translation();
-  const Eigen::Quaterniond q(pose.T_world_camera.linear());
-  char buffer[512];
-  std::snprintf(buffer, sizeof(buffer),
-                "%lld,%lld,%.9f,%.9f,%.9f,%.9f,%.9f,%.9f,%.9f,%.3e,%.3e,%.3e,%.3e,%.3e,%.3e,%s,%d",
-                static_cast<long long>(pose.utime), static_cast<long long>(pose.sequence), t.x(),
-                t.y(), t.z(), q.w(), q.x(), q.y(), q.z(), pose.covariance(0, 0),
-                pose.covariance(1, 1), pose.covariance(2, 2), pose.covariance(3, 3),
-                pose.covariance(4, 4), pose.covariance(5, 5),
-                slamd::trackingStateName(pose.tracking_state), static_cast<int>(pose.source));
-  return buffer;
-}
-
-}  // namespace
 
 int main(int argc, char** argv) {
   using namespace slamd;
@@ -77,8 +58,7 @@ int main(int argc, char** argv) {
   }
   out << (format == "tum"
               ? "# timestamp tx ty tz qx qy qz qw (slamd-pose-log, channel " + channels.pose + ")\n"
-              : "utime,sequence,tx,ty,tz,qw,qx,qy,qz,var_x,var_y,var_z,var_rx,"
-                "var_ry,var_rz,tracking_state,source\n");
+              : std::string(kPoseCsvHeader) + "\n");
 
   std::mutex mutex;  // the LCM thread writes, the main thread flushes
   long long received = 0;
@@ -92,7 +72,7 @@ int main(int argc, char** argv) {
       if (format == "tum") {
         out << formatTumPose(StampedPose{utimeToSeconds(pose.utime), pose.T_world_camera}) << "\n";
       } else {
-        out << csvLine(pose) << "\n";
+        out << formatPoseCsv(pose) << "\n";
       }
       ++received;
       last_pose_ns = steadyNowNs();

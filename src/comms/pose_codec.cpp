@@ -1,5 +1,7 @@
 #include "slamd/comms/pose_codec.hpp"
 
+#include <cstdio>
+
 namespace slamd {
 
 namespace {
@@ -69,6 +71,36 @@ bot_core::pose_t toBotCorePose(const PoseEstimate& pose) {
     msg.accel[i] = 0.0;
   }
   return msg;
+}
+
+PoseEstimate fromBotCorePose(const bot_core::pose_t& msg) {
+  PoseEstimate pose;
+  pose.utime = msg.utime;
+  pose.sequence = 0;
+  pose.T_world_camera = readTransform(msg.pos, msg.orientation);
+  for (int i = 0; i < 3; ++i) {
+    pose.linear_velocity_world_mps[i] = msg.vel[i];
+    pose.angular_velocity_camera_radps[i] = msg.rotation_rate[i];
+  }
+  return pose;
+}
+
+const char* const kPoseCsvHeader =
+    "utime,sequence,tx,ty,tz,qw,qx,qy,qz,var_x,var_y,var_z,var_rx,var_ry,var_rz,tracking_state,"
+    "source";
+
+std::string formatPoseCsv(const PoseEstimate& pose) {
+  const Eigen::Vector3d t = pose.T_world_camera.translation();
+  const Eigen::Quaterniond q(pose.T_world_camera.linear());
+  char buffer[512];
+  std::snprintf(buffer, sizeof(buffer),
+                "%lld,%lld,%.9f,%.9f,%.9f,%.9f,%.9f,%.9f,%.9f,%.3e,%.3e,%.3e,%.3e,%.3e,%.3e,%s,%d",
+                static_cast<long long>(pose.utime), static_cast<long long>(pose.sequence), t.x(),
+                t.y(), t.z(), q.w(), q.x(), q.y(), q.z(), pose.covariance(0, 0),
+                pose.covariance(1, 1), pose.covariance(2, 2), pose.covariance(3, 3),
+                pose.covariance(4, 4), pose.covariance(5, 5),
+                trackingStateName(pose.tracking_state), static_cast<int>(pose.source));
+  return buffer;
 }
 
 slamd::keyframe_trajectory_t toKeyframeTrajectoryMessage(const KeyframeTrajectory& trajectory) {

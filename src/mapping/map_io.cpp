@@ -132,4 +132,30 @@ bool saveOccupancyGrid(const OccupancyGrid2D& grid, const std::string& path, std
       error);
 }
 
+bool writeOcTreeFile(const octomap::OcTree& tree, const std::string& path, std::string* error) {
+  auto endsWith = [&path](const char* suffix) {
+    const std::string tail(suffix);
+    return path.size() >= tail.size() &&
+           path.compare(path.size() - tail.size(), tail.size(), tail) == 0;
+  };
+  const bool full = endsWith(".ot");
+  if (!full && !endsWith(".bt")) {
+    if (error) *error = "'" + path + "': the map file must end in .bt or .ot";
+    return false;
+  }
+  return writeFileAtomically(
+      path, [&](std::ostream& out) { return full ? tree.write(out) : tree.writeBinaryConst(out); },
+      error);
+}
+
+PointCloud occupiedVoxelCentres(const octomap::OcTree& tree) {
+  PointCloud cloud;
+  for (auto it = tree.begin_leafs(); it != tree.end_leafs(); ++it) {
+    if (!tree.isNodeOccupied(*it)) continue;
+    const octomap::point3d c = it.getCoordinate();
+    cloud.points.emplace_back(c.x(), c.y(), c.z());
+  }
+  return cloud;
+}
+
 }  // namespace slamd

@@ -15,6 +15,14 @@ slamd::pose_t toPoseMessage(const PoseEstimate& pose);
 PoseEstimate fromPoseMessage(const slamd::pose_t& message);
 /// bot_core.pose_t for existing LCM tools (no covariance; accel zero: not estimated).
 bot_core::pose_t toBotCorePose(const PoseEstimate& pose);
+/// The pose of a bot_core.pose_t: position, orientation and velocities; it carries no covariance
+/// (left at PoseEstimate's default), tracking state or sequence (both zero).
+PoseEstimate fromBotCorePose(const bot_core::pose_t& message);
+
+/// One pose as a CSV line (no newline) under kPoseCsvHeader: utime, sequence, position,
+/// quaternion (w x y z), the six covariance diagonal entries, tracking state name and source.
+std::string formatPoseCsv(const PoseEstimate& pose);
+extern const char* const kPoseCsvHeader;
 
 /// One keyframe's optimised pose.
 struct KeyframePoseEntry {

@@ -13,6 +13,8 @@
 #include <string>
 #include <vector>
 
+#include <octomap/OcTree.h>
+
 #include "slamd/common/file_io.hpp"
 #include "slamd/mapping/map_types.hpp"
 #include "slamd/mapping/point_cloud.hpp"
@@ -28,6 +30,15 @@ bool writePly(std::ostream& out, const PointCloud& cloud, PlyFormat format);
 /// Reads back a PLY file written by writePly (ASCII or binary little-endian; for tests and tools).
 /// Returns false on anything else.
 bool readPly(const std::string& path, PointCloud& cloud);
+
+/// Writes `tree` atomically to `path`, which ends in .bt (OctoMap's maximum-likelihood binary
+/// format: leaves only, what octovis and octomap_server load) or .ot (the full tree with log-odds).
+/// False with a sentence in *error for another extension or a failed write.
+bool writeOcTreeFile(const octomap::OcTree& tree, const std::string& path,
+                     std::string* error = nullptr);
+
+/// The centres of the occupied leaves of `tree` (metres, the map's frame), without colours.
+PointCloud occupiedVoxelCentres(const octomap::OcTree& tree);
 
 /// Saves a grid as a navigation map: <path> ending in .pgm (binary P5) or .png, with
 /// occupied = 0 (black), free = 254 (white), unknown = 205, +v up; and a sidecar YAML file
