@@ -17,6 +17,10 @@ PACKAGES=(
   iproute2 util-linux octomap-tools
   # benchmarks: peak memory and CPU time of each run
   time
+  # slamd-spy: lcm-spy (LCM's Java library and its chart library), a JDK for the types' jar, and
+  # for its test an X server, a screenshot tool and a font
+  liblcm-java libjchart2d-java default-jdk-headless default-jre xvfb x11-apps netpbm
+  fonts-dejavu-core
 )
 if [ "${1:-}" = "fuzz" ]; then
   PACKAGES+=(clang libclang-rt-14-dev)

@@ -93,6 +93,19 @@ TEST_F(DaemonScenario, AFloodOfTenTimesTheMessageRateIsCountedAndMemoryStaysFlat
   EXPECT_EQ(run("lcm_flood", &log), 0) << log;
 }
 
+TEST_F(DaemonScenario, LcmSpyDecodesEverySlamdChannel) {
+  if (!std::filesystem::exists(binDir() / "slamd-spy")) {
+    GTEST_SKIP() << "slamd-spy is not built (needs packages default-jdk-headless liblcm-java)";
+  }
+  for (const char* tool : {"Xvfb", "java", "javac", "xwd", "xwdtopnm", "pnmtopng"}) {
+    if (std::system(("command -v " + std::string(tool) + " > /dev/null").c_str()) != 0) {
+      GTEST_SKIP() << tool << " is not installed (scripts/install-deps.sh installs it)";
+    }
+  }
+  std::string log;
+  EXPECT_EQ(run("lcm_spy", &log), 0) << log;
+}
+
 TEST_F(DaemonScenario, AFullDiskKeepsTheLastSnapshotAndTheSaveIsRetried) {
   std::string log;
   EXPECT_EQ(run("full_disk", &log), 0) << log;
