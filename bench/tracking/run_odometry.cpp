@@ -53,7 +53,7 @@ int main(int argc, char** argv) {
       const std::string folder = spec.rfind("tum:", 0) == 0 ? spec.substr(4) : spec;
       source = std::make_unique<TumSource>(folder, TumSourceConfig::load(config));
     }
-    reportConfig(config, "slamd-odometry-run");
+    reportConfig(config, "slamd-odometry-run", UnknownKeys::kInSectionsItRead);
     source->open();
   } catch (const ConfigError& e) {
     std::cerr << e.what() << "\n";

@@ -35,7 +35,7 @@ int main(int argc, char** argv) {
     Config config = options.loadConfig();
     if (options.has("lcm-url")) config.set("lcm.url", options.value("lcm-url"));
     channels = ChannelConfig::load(config);
-    reportConfig(config, "slamd-pose-log");
+    reportConfig(config, "slamd-pose-log", UnknownKeys::kInSectionsItRead);
     max_count = std::stoll(options.value("count"));
     timeout_s = std::stod(options.value("timeout"));
   } catch (const std::exception& e) {

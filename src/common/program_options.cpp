@@ -1,6 +1,7 @@
 #include "slamd/common/program_options.hpp"
 
 #include <iostream>
+#include <set>
 #include <sstream>
 
 #include "slamd/common/log.hpp"
@@ -129,8 +130,14 @@ Config ProgramOptions::loadConfig(const std::string& default_path) const {
   return config;
 }
 
-void reportConfig(const Config& config, const std::string& program) {
+void reportConfig(const Config& config, const std::string& program, UnknownKeys which) {
+  auto sectionOf = [](const std::string& key) { return key.substr(0, key.find('.')); };
+  std::set<std::string> sections_read;
+  for (const std::string& key : config.usedKeys()) sections_read.insert(sectionOf(key));
   for (const auto& key : config.unknownKeys()) {
+    if (which == UnknownKeys::kInSectionsItRead && sections_read.count(sectionOf(key)) == 0) {
+      continue;
+    }
     SLAMD_LOG_WARN(program.c_str()) << "unknown configuration key '" << key << "' in "
                                     << config.origin() << " (ignored; misspelt?)";
   }

@@ -69,5 +69,26 @@ TEST(ProgramOptions, HelpExitsWithZero) {
   EXPECT_NE(options.usage().find("--set"), std::string::npos);
 }
 
+TEST(ReportConfig, AToolWarnsOnlyAboutTheSectionsItReads) {
+  // A tool reading only camera.* from the daemon's file: a misspelt camera key is still named,
+  // the daemon's filter keys are not its business.
+  const auto make = [] {
+    Config config = Config::fromYamlString(
+        "camera:\n  fx: 500\n  fxx: 1\nfilter:\n  measurement_noise_scale: 0.6\n");
+    config.getDouble("camera.fx", 525.0, 1.0, 1e4);
+    return config;
+  };
+  testing::internal::CaptureStderr();
+  reportConfig(make(), "tool", UnknownKeys::kInSectionsItRead);
+  const std::string tool = testing::internal::GetCapturedStderr();
+  EXPECT_NE(tool.find("'camera.fxx'"), std::string::npos) << tool;
+  EXPECT_EQ(tool.find("filter.measurement_noise_scale"), std::string::npos) << tool;
+  testing::internal::CaptureStderr();
+  reportConfig(make(), "daemon");
+  const std::string daemon = testing::internal::GetCapturedStderr();
+  EXPECT_NE(daemon.find("'camera.fxx'"), std::string::npos) << daemon;
+  EXPECT_NE(daemon.find("'filter.measurement_noise_scale'"), std::string::npos) << daemon;
+}
+
 }  // namespace
 }  // namespace slamd

@@ -104,7 +104,7 @@ int main(int argc, char** argv) {
     delta_unit_text = options.has("delta-unit")
                           ? options.value("delta-unit")
                           : config.getChoice("eval.delta_unit", "s", {"s", "f", "m", "rad", "deg"});
-    slamd::reportConfig(config, "slamd-eval");
+    slamd::reportConfig(config, "slamd-eval", slamd::UnknownKeys::kInSectionsItRead);
   } catch (const slamd::ConfigError& e) {
     std::cerr << "slamd-eval: " << e.what() << "\n";
     return slamd::kExitConfigError;

@@ -108,7 +108,7 @@ int main(int argc, char** argv) {
       }
       publisher = std::make_unique<LcmFramePublisher>(*lcm, publish_config);
     }
-    reportConfig(config, "slamd-play");
+    reportConfig(config, "slamd-play", UnknownKeys::kInSectionsItRead);
   } catch (const ConfigError& e) {
     std::cerr << "slamd-play: configuration error: " << e.what() << "\n";
     return kExitConfigError;

@@ -70,7 +70,7 @@ int main(int argc, char** argv) {
     if (options.has("frames")) config.set("synthetic.frames", options.value("frames"));
     if (options.has("seed")) config.set("synthetic.seed", options.value("seed"));
     source = std::make_unique<SyntheticSource>(scene, SyntheticConfig::load(config));
-    reportConfig(config, "slamd-synth");
+    reportConfig(config, "slamd-synth", UnknownKeys::kInSectionsItRead);
   } catch (const ConfigError& error) {
     std::cerr << "slamd-synth: " << error.what() << "\n";
     return kExitConfigError;

@@ -75,8 +75,17 @@ class ProgramOptions {
   int exit_code_ = 0;
 };
 
+/// Which unread keys reportConfig() warns about.
+enum class UnknownKeys {
+  kAll,               ///< every key nothing read (the daemon, which reads every section)
+  kInSectionsItRead,  ///< only keys in sections the program read some key of: a tool that shares
+                      ///< the daemon's configuration file reads a few sections and must not call
+                      ///< the others' keys misspelt
+};
+
 /// Logs unknown configuration keys as warnings and the effective configuration at info level;
 /// every program calls it once all modules have read their sections.
-void reportConfig(const Config& config, const std::string& program);
+void reportConfig(const Config& config, const std::string& program,
+                  UnknownKeys which = UnknownKeys::kAll);
 
 }  // namespace slamd
