@@ -21,6 +21,9 @@ PACKAGES=(
   # for its test an X server, a screenshot tool and a font
   liblcm-java libjchart2d-java default-jdk-headless default-jre xvfb x11-apps netpbm
   fonts-dejavu-core
+  # slamd-web: its HTTP + WebSocket server, three.js for its page, and a headless browser for
+  # its test
+  libcivetweb-dev libjs-three chromium-headless-shell
 )
 if [ "${1:-}" = "fuzz" ]; then
   PACKAGES+=(clang libclang-rt-14-dev)

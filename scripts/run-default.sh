@@ -21,7 +21,9 @@
 # LCM runs inside a private network namespace when possible (root + unshare), so nothing leaves
 # this machine; otherwise on the default multicast group with ttl=0 (this host only).
 # Environment: SLAMD_RUN_FRAMES (default 600 = 20 s), SLAMD_RUN_SCENE (room|corridor|corridor_loop),
-# SLAMD_RUN_OUT (default out/run), SLAMD_RUN_STRICT (0|1).
+# SLAMD_RUN_OUT (default out/run), SLAMD_RUN_STRICT (0|1), SLAMD_RUN_WEB (1: also start the web
+# viewer slamd-web and print its URL; LCM then runs on this host's loopback, not in a private
+# namespace, so that a browser here can reach the viewer), SLAMD_RUN_WEB_PORT (default 8080).
 set -euo pipefail
 BUILD_DIR=$(cd "${1:-build}" && pwd)
 BIN="$BUILD_DIR/bin"
@@ -30,10 +32,14 @@ OUT=${SLAMD_RUN_OUT:-$ROOT/out/run}
 FRAMES=${SLAMD_RUN_FRAMES:-600}
 SCENE=${SLAMD_RUN_SCENE:-room}
 STRICT=${SLAMD_RUN_STRICT:-0}
+WEB=${SLAMD_RUN_WEB:-0}
+WEB_PORT=${SLAMD_RUN_WEB_PORT:-8080}
 CONFIG="$ROOT/config/synthetic.yaml"
 mkdir -p "$OUT"
 OUT=$(cd "$OUT" && pwd)
-for program in slamd slamd-synth slamd-pose-log slamd-map-save slamd-eval; do
+programs=(slamd slamd-synth slamd-pose-log slamd-map-save slamd-eval)
+[ "$WEB" = 1 ] && programs+=(slamd-web)
+for program in "${programs[@]}"; do
   [ -x "$BIN/$program" ] || { echo "make run: $BIN/$program is not built" >&2; exit 1; }
 done
 
@@ -69,6 +75,14 @@ run_inside() {
   local pose_log=$!
   "$BIN/slamd-map-save" --log-level warn --out map_from_stream.bt 2> map-save.txt &
   local map_save=$!
+  local web=""
+  if [ "$WEB" = 1 ]; then
+    "$BIN/slamd-web" --log-level warn --port "$WEB_PORT" 2> web.log &
+    web=$!
+    sleep 0.5
+    kill -0 $web 2> /dev/null || { cat web.log >&2; echo "make run: slamd-web did not start" >&2; exit 1; }
+    echo "slamd-web: open http://127.0.0.1:$WEB_PORT/ in a browser on this machine"
+  fi
   echo "slamd: $FRAMES frames of synthetic:$SCENE at 30 Hz, real time; logs in $OUT/slamd.log"
   local rc=0
   "$BIN/slamd" --config "$CONFIG" --source "tum:$CACHE" --set capture.pacing.mode=realtime \
@@ -76,13 +90,20 @@ run_inside() {
     --metrics-out metrics.json 2> slamd.log || rc=$?
   kill -INT $pose_log $map_save 2> /dev/null || true
   wait $pose_log $map_save 2> /dev/null || true
+  if [ -n "$web" ]; then
+    if [ -t 0 ]; then
+      read -r -p "slamd-web still shows the run at http://127.0.0.1:$WEB_PORT/; press Enter to stop it " _ || true
+    fi
+    kill -INT $web 2> /dev/null || true
+    wait $web 2> /dev/null || true
+  fi
   return $rc
 }
 export -f run_inside
-export BIN ROOT OUT FRAMES SCENE CONFIG CACHE
+export BIN ROOT OUT FRAMES SCENE CONFIG CACHE WEB WEB_PORT
 
 slamd_rc=0
-if [ "$(id -u)" = 0 ] && unshare -n true 2> /dev/null; then
+if [ "$WEB" != 1 ] && [ "$(id -u)" = 0 ] && unshare -n true 2> /dev/null; then
   SLAMD_PRIVATE_NET=1 unshare -n bash -c run_inside || slamd_rc=$?
 else
   bash -c run_inside || slamd_rc=$?

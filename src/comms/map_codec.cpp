@@ -107,24 +107,31 @@ std::unique_ptr<octomap::OcTree> fullMapToOcTree(const FullMap& map, std::string
   return tree;
 }
 
+std::optional<octomap::OcTreeKey> voxelChangeKey(const VoxelChange& voxel,
+                                                 const octomap::OcTree& tree) {
+  // Checked here, before OctoMap's coordToKey: it converts to int without a range check, so a
+  // NaN or a coordinate far outside the tree (found by fuzzing: 2.7e24 m) is undefined
+  // behaviour. The tree spans +-resolution * 2^15 around the origin on each axis.
+  const double extent_m = tree.getResolution() * 32768.0;
+  if (!voxel.center_m.allFinite() || !std::isfinite(voxel.log_odds) ||
+      (voxel.center_m.cast<double>().array().abs() >= extent_m).any()) {
+    return std::nullopt;
+  }
+  octomap::OcTreeKey key;
+  if (!tree.coordToKeyChecked(
+          octomap::point3d(voxel.center_m.x(), voxel.center_m.y(), voxel.center_m.z()), key)) {
+    return std::nullopt;
+  }
+  return key;
+}
+
 std::size_t applyMapUpdate(const MapUpdate& update, octomap::OcTree& tree) {
   std::size_t applied = 0;
   for (const VoxelChange& voxel : update.voxels) {
-    // Checked here, before OctoMap's coordToKey: it converts to int without a range check, so a
-    // NaN or a coordinate far outside the tree (found by fuzzing: 2.7e24 m) is undefined
-    // behaviour. The tree spans +-resolution * 2^15 around the origin on each axis.
-    const double extent_m = tree.getResolution() * 32768.0;
-    if (!voxel.center_m.allFinite() || !std::isfinite(voxel.log_odds) ||
-        (voxel.center_m.cast<double>().array().abs() >= extent_m).any()) {
-      continue;
+    if (const auto key = voxelChangeKey(voxel, tree)) {
+      tree.setNodeValue(*key, voxel.log_odds, true);
+      ++applied;
     }
-    octomap::OcTreeKey key;
-    if (!tree.coordToKeyChecked(
-            octomap::point3d(voxel.center_m.x(), voxel.center_m.y(), voxel.center_m.z()), key)) {
-      continue;
-    }
-    tree.setNodeValue(key, voxel.log_odds, true);
-    ++applied;
   }
   tree.updateInnerOccupancy();
   return applied;

@@ -106,6 +106,19 @@ TEST_F(DaemonScenario, LcmSpyDecodesEverySlamdChannel) {
   EXPECT_EQ(run("lcm_spy", &log), 0) << log;
 }
 
+TEST_F(DaemonScenario, TheWebViewerShowsTheRunInHeadlessChromiumAndRidesThroughARestart) {
+  if (!std::filesystem::exists(binDir() / "slamd-web")) {
+    GTEST_SKIP() << "slamd-web is not built (needs package libcivetweb-dev)";
+  }
+  for (const char* tool : {"chromium-headless-shell", "pngtopnm", "ppmhist"}) {
+    if (std::system(("command -v " + std::string(tool) + " > /dev/null").c_str()) != 0) {
+      GTEST_SKIP() << tool << " is not installed (scripts/install-deps.sh installs it)";
+    }
+  }
+  std::string log;
+  EXPECT_EQ(run("web_viewer", &log), 0) << log;
+}
+
 TEST_F(DaemonScenario, AFullDiskKeepsTheLastSnapshotAndTheSaveIsRetried) {
   std::string log;
   EXPECT_EQ(run("full_disk", &log), 0) << log;

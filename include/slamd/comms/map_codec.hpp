@@ -43,6 +43,11 @@ std::optional<FullMap> fromFullMapMessage(const slamd::voxel_map_t& message,
 /// Builds an OcTree from a full map (validated first); nullptr with *error on failure.
 std::unique_ptr<octomap::OcTree> fullMapToOcTree(const FullMap& map, std::string* error = nullptr);
 
+/// The tree key of an update's voxel; nullopt for non-finite values or a centre outside the
+/// tree's extent (such voxels are skipped).
+std::optional<octomap::OcTreeKey> voxelChangeKey(const VoxelChange& voxel,
+                                                 const octomap::OcTree& tree);
+
 /// Sets each voxel of `update` to its log-odds in `tree` (whose resolution must match);
 /// returns the number applied. Voxels outside the tree's extent are skipped.
 std::size_t applyMapUpdate(const MapUpdate& update, octomap::OcTree& tree);
