@@ -23,34 +23,16 @@ using namespace slamd;
 
 constexpr float kResolutionM = 0.05f;
 
-/// The n-th voxel of a 10 m x 10 m room's walls and floor, finest-voxel centres.
-Eigen::Vector3f roomVoxel(std::int64_t n) {
-  const int side = 200;  // voxels along a wall
-  const int height = 50;
-  const std::int64_t per_wall = static_cast<std::int64_t>(side) * height;
-  const std::int64_t layer = n / (4 * per_wall + side * side);
-  const std::int64_t i = n % (4 * per_wall + side * side);
-  const float offset = 0.025f + kResolutionM * static_cast<float>(layer);  // walls thicken
+/// The n-th voxel of the map: 10 m x 10 m layers of 200 x 200 finest voxels, one above the other
+/// 1 m apart (y down: the first layer is the floor at y = 1.5 m). Every n is a different voxel.
+Eigen::Vector3f mapVoxel(std::int64_t n) {
+  const std::int64_t side = 200;
   auto centre = [](std::int64_t k) {
     return -5.0f + 0.025f + kResolutionM * static_cast<float>(k);
   };
-  if (i >= 4 * per_wall) {  // floor (y down: the floor is at +y)
-    const std::int64_t f = i - 4 * per_wall;
-    return {centre(f % side), 1.5f - offset, centre(f / side)};
-  }
-  const std::int64_t wall = i / per_wall;
-  const std::int64_t along = (i % per_wall) % side;
-  const float y = 1.5f - kResolutionM * static_cast<float>((i % per_wall) / side);
-  switch (wall) {
-    case 0:
-      return {centre(along), y, -5.0f + offset};
-    case 1:
-      return {centre(along), y, 5.0f - offset};
-    case 2:
-      return {-5.0f + offset, y, centre(along)};
-    default:
-      return {5.0f - offset, y, centre(along)};
-  }
+  const std::int64_t layer = n / (side * side);
+  const std::int64_t i = n % (side * side);
+  return {centre(i % side), 1.525f - static_cast<float>(layer), centre(i / side)};
 }
 
 }  // namespace
@@ -105,10 +87,10 @@ int main(int argc, char** argv) {
         const bool growing = next_voxel - oldest_voxel < target_voxels;
         const std::int64_t added = growing ? growth : churn / 2;
         for (std::int64_t k = 0; k < added; ++k)
-          update.voxels.push_back({roomVoxel(next_voxel++), 2.0f});
+          update.voxels.push_back({mapVoxel(next_voxel++), 2.0f});
         if (!growing) {
           for (std::int64_t k = 0; k < churn / 2; ++k) {
-            update.voxels.push_back({roomVoxel(oldest_voxel++), -2.0f});
+            update.voxels.push_back({mapVoxel(oldest_voxel++), -2.0f});
           }
         }
         bus.publishMessage(channels.map_update, toMapUpdateMessage(update));

@@ -21,6 +21,8 @@
   const VOXEL_KIND_REPLACE = 1;
   const VOXEL_KIND_CHANGES = 2;
   const VIEW_FOV_DEG = 60;
+  // Voxel points are drawn slightly larger than a voxel so that pixel rounding leaves no holes.
+  const VOXEL_POINT_OVERLAP = 1.2;
 
   // Tracking state -> colour (0 not initialised, 1 ok, 2 predicted, 3 lost, 4 relocalised).
   const STATE_COLOURS = [0x9e9e9e, 0x33dd55, 0xffb000, 0xff3b3b, 0x3c9cff].map((hex) => new THREE.Color(hex));
@@ -37,6 +39,10 @@
     'z': { rotationX_rad: -Math.PI / 2, heightAxis: 2, heightSign: 1, depthAxis: 1, depthSign: -1 },
     '-z': { rotationX_rad: Math.PI / 2, heightAxis: 2, heightSign: -1, depthAxis: 1, depthSign: 1 },
   };
+  // slamd spells them as mapping.up_axis does; an x axis up is not shown (the page falls back to
+  // -y and says so in its header).
+  UP_AXES['+y'] = UP_AXES['y'];
+  UP_AXES['+z'] = UP_AXES['z'];
 
   // Height colour ramp: blue -> green -> yellow -> red.
   const RAMP_STOPS = [[0.15, 0.35, 1.0], [0.1, 0.85, 0.35], [1.0, 0.9, 0.1], [1.0, 0.25, 0.1]];
@@ -176,6 +182,11 @@
   frustumGeometry.setAttribute('position', new THREE.Float32BufferAttribute(frustumSegments(CAMERA_FRUSTUM_DEPTH_M, true), 3));
   const frustumMaterial = new THREE.LineBasicMaterial({ color: stateColour(0) });
   newestCameraGroup.add(new THREE.LineSegments(frustumGeometry, frustumMaterial));
+  // A fixed-size dot at the camera centre keeps the small frustum findable from far away.
+  const cameraDotGeometry = new THREE.BufferGeometry();
+  cameraDotGeometry.setAttribute('position', new THREE.Float32BufferAttribute([0, 0, 0], 3));
+  const cameraDotMaterial = new THREE.PointsMaterial({ size: 7, sizeAttenuation: false, color: stateColour(0) });
+  newestCameraGroup.add(new THREE.Points(cameraDotGeometry, cameraDotMaterial));
   const vanishingPointBuffer = new VertexBuffer(32);
   const vanishingPointLines = new THREE.LineSegments(vanishingPointBuffer.geometry,
     new THREE.LineBasicMaterial({ vertexColors: THREE.VertexColors }));
@@ -187,7 +198,6 @@
   worldGroup.add(voxelPoints, trailLine, keyframeFrustaLines, keyframePathLine, newestCameraGroup);
 
   let groundGrid = null;
-  let groundGridKey = '';
 
   // ---------------------------------------------------------------------------------------------
   // Page state
@@ -219,23 +229,14 @@
   let lastOccupancyDraw_ms = -Infinity;
   let lastRender_ms = -Infinity;
 
+  // Totals since load; window* = the current one-second statistics window; renderFps and last* =
+  // the last completed window (reported in client_stats).
   const counters = {
-    framesRendered: 0,
-    messagesReceived: 0,
-    voxelMessages: 0,
-    lastMessage_ms: null,
-    windowMaxMessageGap_ms: 0,
-    lastVoxelMessage_ms: null,
-    voxelIntervalSum_ms: 0,
-    voxelIntervalCount: 0,
-    windowMaxRender_ms: 0,
-    windowFrames: 0,
-    windowStart_ms: performance.now(),
-    renderFps: 0,
-    lastMaxMessageGap_ms: 0,
-    lastMaxRender_ms: 0,
-    malformedMessages: 0,
+    framesRendered: 0, messagesReceived: 0, voxelMessages: 0, malformedMessages: 0,
+    lastMessage_ms: null, lastVoxelMessage_ms: null, voxelIntervalSum_ms: 0, voxelIntervalCount: 0,
     lastResyncRequest_ms: -Infinity,
+    windowStart_ms: performance.now(), windowFrames: 0, windowMaxMessageGap_ms: 0, windowMaxRender_ms: 0,
+    renderFps: 0, lastMaxMessageGap_ms: 0, lastMaxRender_ms: 0,
   };
 
   // ---------------------------------------------------------------------------------------------
@@ -243,8 +244,8 @@
   function setResolution(resolution_m) {
     world.resolution_m = resolution_m;
     // PointsMaterial sizes points as size * (viewport height / 2) / depth pixels; dividing by
-    // tan(fov / 2) makes a point exactly resolution_m world units tall.
-    voxelMaterial.size = resolution_m / Math.tan(VIEW_FOV_DEG * Math.PI / 360);
+    // tan(fov / 2) makes a point resolution_m world units tall (times the overlap factor).
+    voxelMaterial.size = VOXEL_POINT_OVERLAP * resolution_m / Math.tan(VIEW_FOV_DEG * Math.PI / 360);
   }
 
   function clearVoxels() {
@@ -325,12 +326,6 @@
     };
   }
 
-  // Height of the map floor (minimum voxel height), 0 without a map.
-  function floorHeight_m() {
-    const bounds = voxelDisplayBounds();
-    return bounds ? bounds.y.min : 0;
-  }
-
   // Recolours all voxels if the height range moved by more than 5 % of its span (or a voxel).
   function updateHeightRamp(bounds) {
     if (!bounds) return false;
@@ -363,16 +358,15 @@
       size_m = Math.max(10, 2 * Math.ceil(extent_m / 2 + 1));
     }
     const floor_m = bounds ? bounds.y.min - world.resolution_m / 2 : 0;
-    const key = `${size_m}`;
-    if (key !== groundGridKey) {
+    if (!groundGrid || groundGrid.userData.size_m !== size_m) {
       if (groundGrid) {
         scene.remove(groundGrid);
         groundGrid.geometry.dispose();
         groundGrid.material.dispose();
       }
       groundGrid = new THREE.GridHelper(size_m, size_m, 0x4a5562, 0x2a313a);
+      groundGrid.userData.size_m = size_m;
       scene.add(groundGrid);
-      groundGridKey = key;
     }
     groundGrid.position.set(centreX, floor_m, centreZ);
   }
@@ -426,6 +420,7 @@
       newestCameraGroup.position.fromArray(newest.p);
       quaternionFromWxyz(newest.q, newestCameraGroup.quaternion);
       frustumMaterial.color.copy(stateColour(newest.state));
+      cameraDotMaterial.color.copy(stateColour(newest.state));
     }
     occupancyDirty = true;
   }
@@ -662,8 +657,11 @@
       ['poses received', msg.poses_received], ['voxels', msg.voxels], ['full maps', msg.full_maps],
       ['updates applied', msg.updates_applied], ['gaps', msg.gaps], ['map requests', msg.map_requests],
       ['malformed', msg.malformed], ['clients', msg.clients],
-    ].map(([name, value]) => `<tr><td>${escapeHtml(name)}</td><td>${escapeHtml(value === undefined ? '-' : value)}</td></tr>`);
-    $('viewer-panel').innerHTML = `<table class="kv"><tbody>${rows.join('')}</tbody></table>`;
+    ].map(([name, value]) => `<td>${escapeHtml(name)}</td><td>${escapeHtml(value === undefined ? '-' : value)}</td>`);
+    // Two name/value pairs per table row keeps the panel short.
+    let body = '';
+    for (let i = 0; i < rows.length; i += 2) body += `<tr>${rows[i]}${rows[i + 1] || ''}</tr>`;
+    $('viewer-panel').innerHTML = `<table class="kv kv2"><tbody>${body}</tbody></table>`;
   }
 
   // ---------------------------------------------------------------------------------------------
@@ -706,6 +704,9 @@
       uMin = Math.min(uMin, u); uMax = Math.max(uMax, u);
       vMin = Math.min(vMin, v); vMax = Math.max(vMax, v);
     }
+    // Snap the origin to the voxel grid so that every cell holds the same number of voxel columns.
+    uMin = Math.floor(uMin / resolution_m) * resolution_m;
+    vMin = Math.floor(vMin / resolution_m) * resolution_m;
     if (!(uMax >= uMin)) {
       ctx.fillStyle = '#6f6a60';
       ctx.font = '13px sans-serif';
@@ -723,8 +724,8 @@
     const toY = (v) => originY + (v - vMin) * pxPerM;
 
     if (bounds) {
-      // Bin the voxels in the height band into cells of at least one voxel and one canvas pixel.
-      const cellSize_m = Math.max(resolution_m, 1 / (pxPerM * pixelRatio));
+      // Bin the voxels in the height band into cells of a whole number of voxels, >= one canvas pixel.
+      const cellSize_m = resolution_m * Math.max(1, Math.ceil(1 / (pxPerM * pixelRatio * resolution_m)));
       const cellsU = Math.ceil((uMax - uMin) / cellSize_m) + 1;
       const cellsV = Math.ceil((vMax - vMin) / cellSize_m) + 1;
       if (occupancyCells.counts.length < cellsU * cellsV) occupancyCells.counts = new Uint16Array(cellsU * cellsV);
@@ -822,7 +823,7 @@
       : 3;
     const target = ($('follow-camera').checked && newestCameraDisplayPosition()) || centre;
     controls.target.copy(target);
-    camera.position.copy(target).add(new THREE.Vector3(0.35, 1.0, 1.2).multiplyScalar(radius_m));
+    camera.position.copy(target).add(new THREE.Vector3(0.4, 1.2, 1.5).multiplyScalar(radius_m));
     controls.update();
     needsRender = true;
   }
@@ -911,8 +912,10 @@
     if (socket && socket.readyState === WebSocket.OPEN) socket.send(JSON.stringify(obj));
   }
 
-  function stats() {
+  // The fields of the protocol's client_stats message (windowed values are from the last full second).
+  function clientStats() {
     return {
+      type: 'client_stats',
       first_paint_ms: firstPaint_ms,
       frames_rendered: counters.framesRendered,
       render_fps: counters.renderFps,
@@ -924,11 +927,16 @@
       mean_voxel_message_interval_ms: counters.voxelIntervalCount > 0
         ? counters.voxelIntervalSum_ms / counters.voxelIntervalCount : 0,
       max_render_ms: counters.lastMaxRender_ms,
+    };
+  }
+
+  function stats() {
+    return Object.assign(clientStats(), {
       keyframes: keyframeCount,
       malformed_messages: counters.malformedMessages,
       connected: $('connection').textContent === 'connected',
       ready: document.body.dataset.ready === '1',
-    };
+    });
   }
 
   // Closes the one-second statistics window and sends client_stats.
@@ -945,13 +953,7 @@
     counters.windowMaxRender_ms = 0;
     counters.windowStart_ms = now_ms;
     $('render-fps').textContent = counters.renderFps.toFixed(0);
-    const s = stats();
-    send({
-      type: 'client_stats', first_paint_ms: s.first_paint_ms, frames_rendered: s.frames_rendered,
-      render_fps: s.render_fps, messages_received: s.messages_received, voxel_messages: s.voxel_messages,
-      poses_received: s.poses_received, voxels: s.voxels, max_message_gap_ms: s.max_message_gap_ms,
-      mean_voxel_message_interval_ms: s.mean_voxel_message_interval_ms, max_render_ms: s.max_render_ms,
-    });
+    send(clientStats());
   }
 
   function setConnected(connected) {

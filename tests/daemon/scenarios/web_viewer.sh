@@ -9,7 +9,11 @@ cd "$WORK"
 export HOME=$WORK  # Chromium writes its profile and crash folders under $HOME
 PORT=8080
 URL=http://127.0.0.1:$PORT/
-CHROMIUM=(chromium-headless-shell --no-sandbox --enable-unsafe-swiftshader --disable-gpu-sandbox
+# Debian's /usr/bin/chromium-headless-shell is a script that runs the browser as its child, so
+# stopping the script would leave the browser running: start the browser itself.
+CHROMIUM_BIN=/usr/lib/chromium/chromium-headless-shell
+[ -x "$CHROMIUM_BIN" ] || CHROMIUM_BIN=chromium-headless-shell
+CHROMIUM=("$CHROMIUM_BIN" --no-sandbox --enable-unsafe-swiftshader --disable-gpu-sandbox
           --window-size=1280,800 --user-data-dir="$WORK/chromium")
 
 "$SLAMD_BIN/slamd-web" --port $PORT --client-stats-out client-stats.jsonl --log-level info \
