@@ -149,10 +149,14 @@ void LcmFrameSource::onMessage(const lcm::ReceiveBuffer* buffer, const std::stri
   RawMessage message;
   const auto* data = static_cast<const std::uint8_t*>(buffer->data);
   message.bytes.assign(data, data + buffer->data_size);
-  message.number = received_.fetch_add(1, std::memory_order_relaxed) + 1;
+  // Only this thread writes received_ while the source is open. It is counted after the push,
+  // so a message counted as received is already in the queue.
+  const std::uint64_t number = received_.load(std::memory_order_relaxed) + 1;
+  message.number = number;
   message.arrival_steady_ns = steadyNowNs();
   last_arrival_ns_.store(message.arrival_steady_ns, std::memory_order_relaxed);
   queue_->push(std::move(message));
+  received_.store(number, std::memory_order_release);
   arrived_.notify();
 }
 

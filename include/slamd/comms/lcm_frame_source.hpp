@@ -80,8 +80,8 @@ class LcmFrameSource : public FrameSource {
   std::string description() const override;
   bool isLive() const override { return true; }
 
-  /// Messages the receive thread has taken from LCM (any type, good or bad).
-  std::uint64_t messagesReceived() const { return received_.load(std::memory_order_relaxed); }
+  /// Messages the receive thread has taken from LCM and queued (any type, good or bad).
+  std::uint64_t messagesReceived() const { return received_.load(std::memory_order_acquire); }
 
  private:
   struct RawMessage {
