@@ -79,8 +79,16 @@ run_inside() {
   if [ "$WEB" = 1 ]; then
     "$BIN/slamd-web" --log-level warn --port "$WEB_PORT" 2> web.log &
     web=$!
-    sleep 0.5
-    kill -0 $web 2> /dev/null || { cat web.log >&2; echo "make run: slamd-web did not start" >&2; exit 1; }
+    local waited=0
+    until (exec 3<> "/dev/tcp/127.0.0.1/$WEB_PORT") 2> /dev/null; do
+      if ! kill -0 $web 2> /dev/null || [ $waited -ge 100 ]; then
+        cat web.log >&2
+        echo "make run: slamd-web did not start listening on port $WEB_PORT" >&2
+        exit 1
+      fi
+      sleep 0.1
+      waited=$((waited + 1))
+    done
     echo "slamd-web: open http://127.0.0.1:$WEB_PORT/ in a browser on this machine"
   fi
   echo "slamd: $FRAMES frames of synthetic:$SCENE at 30 Hz, real time; logs in $OUT/slamd.log"

@@ -458,11 +458,12 @@ std::string ViewerModel::viewerMessage(std::int64_t now_ns) const {
 std::string ViewerModel::replaceVoxelsFrame() const {
   // The voxels as pages last saw them: the current set with the changes since the last broadcast
   // undone.
-  std::size_t count = 0;
-  for (VoxelKey key : occupied_keys_) {
-    if (!changed_since_broadcast_.count(key)) ++count;
+  // Counted from the changes alone, so the whole set is walked once.
+  std::size_t count = occupied_keys_.size();
+  for (const auto& [key, was_occupied] : changed_since_broadcast_) {
+    count -= occupied_keys_.count(key);
+    count += was_occupied ? 1 : 0;
   }
-  for (const auto& [key, was_occupied] : changed_since_broadcast_) count += was_occupied ? 1 : 0;
   std::string frame =
       voxelFrameHeader(VoxelFrameKind::kReplace, count, replica_.tree().getResolution());
   for (VoxelKey key : occupied_keys_) {

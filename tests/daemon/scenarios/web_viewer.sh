@@ -50,7 +50,19 @@ run_slamd 90 slamd-1.log
 POSE_LOG_PID=$!
 wait_for 10 "slamd-pose-log to open its output" test -e poses.txt
 run_slamd 150 slamd-2.log
-sleep 1  # the viewer's last 10 Hz tick, and the live page's last report
+# The run is over once slamd-pose-log has the second run's poses and the live page has reported
+# twice more with the same pose and voxel counts (it reports every second, after slamd-web's
+# last 10 Hz tick).
+wait_for 20 "slamd-pose-log to receive the second run's poses" \
+  test "$(grep -vc '^#' poses.txt)" -ge 140
+reports_at_end=$(wc -l < client-stats.jsonl)
+live_page_settled() {
+  [ "$(wc -l < client-stats.jsonl)" -ge $((reports_at_end + 2)) ] || return 1
+  local counts
+  counts=$(tail -2 client-stats.jsonl | sed 's/.*"poses_received":\([0-9]*\).*"voxels":\([0-9]*\).*/\1 \2/' | uniq | wc -l)
+  [ "$counts" -eq 1 ]
+}
+wait_for 20 "the live page's counts to settle" live_page_settled
 kill -INT $POSE_LOG_PID
 wait $POSE_LOG_PID || true
 poses_logged=$(grep -vc '^#' poses.txt)
