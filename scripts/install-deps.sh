@@ -15,8 +15,8 @@ PACKAGES=(
   libgtest-dev libgmock-dev libbenchmark-dev
   # integration tests: network namespaces (unshare, ip), octomap tools
   iproute2 util-linux octomap-tools
-  # benchmarks: peak memory and CPU time of each run
-  time
+  # benchmarks: peak memory and CPU time of each run; the web and soak benchmarks' summaries
+  time python3
   # slamd-spy: lcm-spy (LCM's Java library and its chart library), a JDK for the types' jar, and
   # for its test an X server, a screenshot tool and a font
   liblcm-java libjchart2d-java default-jdk-headless default-jre xvfb x11-apps netpbm
