@@ -25,7 +25,7 @@ void BackendStage::reset() {
 }
 
 std::optional<BackendCorrection> BackendStage::process(const EstimatedPacket& packet) {
-  if (!packet.frame || !packet.odometry) return std::nullopt;
+  if (!packet.odometry) return std::nullopt;  // heartbeat
   const TrackingState state = packet.pose.tracking_state;
   if (state == TrackingState::kLost || state == TrackingState::kNotInitialized) {
     return std::nullopt;

@@ -38,8 +38,9 @@ const ConfigSchema<DaemonConfig>& DaemonConfig::schema() {
                   "frames waiting for mapping; live runs skip to the newest, datasets played as "
                   "fast as possible wait")
           .number("backend_queue", &C::backend_queue, 1, 100000, "frames",
-                  "filtered frames waiting for the back end (never dropped: a lost keyframe would "
-                  "break the graph); absorbs long optimisations")
+                  "filtered frames waiting for the back end, never dropped (a lost keyframe would "
+                  "break the graph): datasets wait when it is full; on a live source it grows by "
+                  "this many at a time rather than hold up the filter")
           .flag("vanishing_point_thread", &C::vanishing_point_thread,
                 "detect vanishing points on a thread of their own, in parallel with tracking, "
                 "instead of on the filter thread (takes a few ms off the capture-to-pose path)")

@@ -419,11 +419,23 @@ void SlamDaemon::Impl::buildSteps(LcmBus& bus, DaemonPublisher& publisher) {
   }
 }
 
+// The back end's copy of a filtered frame: a frame that is not a keyframe loses its images (the
+// back end uses only its odometry and pose), so a backlog behind a long optimisation costs about
+// a kilobyte a frame instead of the images' megabytes.
+namespace {
+void slimBackendItem(EstimatedPacket& packet) {
+  if (packet.odometry && !packet.odometry->is_keyframe) packet.frame.reset();
+}
+}  // namespace
+
 // The wiring table: each stage, its input, the edge that feeds it (capacity, policy) and its
 // thread's niceness. Datasets played as fast as possible wait for slow stages (nothing is lost,
 // runs are repeatable); live sources must never be held up: their frames are dropped oldest-first
 // (counted) and mapping skips to the newest frame. Mapping and the back end are off the
-// latency-critical path: their threads use what the others leave.
+// latency-critical path: their threads use what the others leave. The back end needs every
+// frame (a lost keyframe would break the graph) but must never hold up the filter, so on a live
+// source its queue grows instead (a long optimisation is caught up afterwards); it holds the
+// images of keyframes only.
 void SlamDaemon::Impl::wire(Pipeline& pipeline) {
   DaemonSteps& s = *steps;
   const bool live = source->isLive();
@@ -436,7 +448,8 @@ void SlamDaemon::Impl::wire(Pipeline& pipeline) {
   const EdgeOptions publish_in = edge(daemon.publish_queue, EdgePolicy::kBackpressure);
   const EdgeOptions mapping_in =
       edge(daemon.mapping_queue, live ? EdgePolicy::kDrainToNewest : EdgePolicy::kBackpressure);
-  const EdgeOptions backend_in = edge(daemon.backend_queue, EdgePolicy::kBackpressure);
+  const EdgeOptions backend_in =
+      edge(daemon.backend_queue, live ? EdgePolicy::kGrowing : EdgePolicy::kBackpressure);
   // clang-format off
   //  stage        input      edge        step
   auto captured = pipeline.addSource<CapturePacket>(
@@ -452,7 +465,7 @@ void SlamDaemon::Impl::wire(Pipeline& pipeline) {
   if (s.mapping) pipeline.addSink<EstimatedPacket>(
       "mapping",   estimated, mapping_in, body(*s.mapping));
   if (s.backend) pipeline.addSink<EstimatedPacket>(
-      "backend",   estimated, backend_in, body(*s.backend));
+      "backend",   estimated, backend_in, body(*s.backend), slimBackendItem);
   //  thread options
   if (s.mapping) pipeline.setStageNice("mapping", daemon.mapping_nice);
   if (s.backend) pipeline.setStageNice("backend", daemon.backend_nice);

@@ -12,6 +12,10 @@ constexpr const char* kLog = "slamd";
 }  // namespace
 
 bool StepBase::enter(std::uint64_t epoch, const RgbdFramePtr& frame) {
+  return enter(epoch, frame ? frame->utime : Utime{-1});
+}
+
+bool StepBase::enter(std::uint64_t epoch, Utime utime) {
   if (epoch < epoch_) {
     ++stale_;
     return false;
@@ -21,7 +25,7 @@ bool StepBase::enter(std::uint64_t epoch, const RgbdFramePtr& frame) {
     epoch_ = epoch;
     ++resets_;
   }
-  if (trace_) trace_(StepTraceEntry{frame ? frame->utime : -1, epoch, resets_});
+  if (trace_) trace_(StepTraceEntry{utime, epoch, resets_});
   return true;
 }
 
@@ -384,7 +388,11 @@ BackendStepStats BackendStep::stats() const {
 }
 
 void BackendStep::process(const EstimatedPacket& packet) {
-  if (!enter(packet.reset_epoch, packet.frame)) return;
+  // The back end's queue drops the images of frames that are not keyframes (see
+  // slamBackendItem), so the capture time comes from the odometry.
+  const Utime utime =
+      packet.frame ? packet.frame->utime : (packet.odometry ? packet.odometry->utime : Utime{-1});
+  if (!enter(packet.reset_epoch, utime)) return;
   std::optional<BackendCorrection> correction = backend_.process(packet);
   const BackendStageStats& stats = backend_.stats();
   keyframes_.store(static_cast<std::int32_t>(stats.keyframes), std::memory_order_relaxed);

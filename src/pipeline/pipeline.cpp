@@ -17,6 +17,8 @@ const char* edgePolicyName(EdgePolicy policy) {
       return "drop-oldest";
     case EdgePolicy::kDrainToNewest:
       return "drain-to-newest";
+    case EdgePolicy::kGrowing:
+      return "growing";
   }
   return "?";
 }

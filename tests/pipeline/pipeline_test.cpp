@@ -178,6 +178,46 @@ TEST_F(PipelineTest, DrainToNewestSkipsToTheNewestAndCountsExactly) {
   EXPECT_EQ(run.edge.delivered, 2u);
 }
 
+TEST_F(PipelineTest, GrowingNeverHoldsUpTheProducerAndDeliversEverythingInOrder) {
+  // The source pushes all 100 items while the consumer holds item 0: a backpressure edge of 4
+  // would block it, a growing one takes them all.
+  const GatedRun run = runGated(EdgePolicy::kGrowing, 4, 100);
+  std::vector<std::uint64_t> all(100);
+  std::iota(all.begin(), all.end(), 0);
+  EXPECT_EQ(run.delivered, all);
+  EXPECT_EQ(run.edge.pushed, 100u);
+  EXPECT_EQ(run.edge.dropped, 0u);
+  EXPECT_EQ(run.edge.delivered, 100u);
+  EXPECT_EQ(run.edge.policy, "growing");
+}
+
+TEST_F(PipelineTest, OnEnqueueChangesOnlyTheCopyOfItsOwnSink) {
+  Pipeline pipeline(PipelineMode::kThreaded);
+  std::uint64_t next = 0;
+  auto images = pipeline.addSource<Image>("source", [&]() -> SourceStep<Image> {
+    if (next == 50) return SourceStep<Image>::end();
+    return SourceStep<Image>::of(makeImage(next++));
+  });
+  std::vector<std::size_t> full_sizes, slim_sizes;  // each written by its sink's thread only
+  pipeline.addSink<Image>("full", images, {4, EdgePolicy::kBackpressure},
+                          [&](Image image) { full_sizes.push_back(image.pixels.size()); });
+  pipeline.addSink<Image>(
+      "slim", images, {4, EdgePolicy::kGrowing},
+      [&](Image image) { slim_sizes.push_back(image.pixels.size()); },
+      [](Image& image) {
+        if (image.id % 2 == 1) image.pixels.clear();
+      });
+  pipeline.start();
+  ASSERT_TRUE(pipeline.waitUntilFinished(std::chrono::steady_clock::now() + 30s));
+  pipeline.stop(1s);
+  ASSERT_EQ(full_sizes.size(), 50u);
+  ASSERT_EQ(slim_sizes.size(), 50u);
+  for (std::size_t i = 0; i < 50; ++i) {
+    EXPECT_EQ(full_sizes[i], 256u) << i;
+    EXPECT_EQ(slim_sizes[i], i % 2 == 1 ? 0u : 256u) << i;
+  }
+}
+
 TEST_F(PipelineTest, DropPoliciesUnderFreeRunningLoadAccountForEveryItem) {
   for (EdgePolicy policy : {EdgePolicy::kDropOldest, EdgePolicy::kDrainToNewest}) {
     std::vector<StageStats> stats;

@@ -45,14 +45,16 @@ struct VanishingPointPacket {
   VanishingPoint detection;
 };
 
-/// filter -> publisher, mapping
+/// filter -> publisher, mapping, back end
 struct EstimatedPacket {
-  RgbdFramePtr frame;  ///< null: heartbeat
-  std::optional<OdometryResult> odometry;
-  PoseEstimate pose;  ///< the pose slamd publishes for this frame
+  /// Null in a heartbeat, and in the back end's copy of a frame that is not a keyframe (its queue
+  /// keeps only what the back end uses: odometry and pose; a keyframe keeps its images).
+  RgbdFramePtr frame;
+  std::optional<OdometryResult> odometry;  ///< set for every frame, empty in a heartbeat
+  PoseEstimate pose;                       ///< the pose slamd publishes for this frame
   std::optional<VanishingPointReport> vanishing_point;
   std::uint64_t reset_epoch = 0;
-  bool isHeartbeat() const { return !frame; }
+  bool isHeartbeat() const { return !frame && !odometry; }
 };
 
 }  // namespace slamd

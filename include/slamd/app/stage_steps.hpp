@@ -86,6 +86,8 @@ class StepBase {
   /// Resets the step when `epoch` is newer than its own. Returns false for a stale packet (older
   /// epoch), which the caller must not process.
   bool enter(std::uint64_t epoch, const RgbdFramePtr& frame);
+  /// The same for a packet that carries its capture time but no images (-1: a heartbeat).
+  bool enter(std::uint64_t epoch, Utime utime);
 
  private:
   std::uint64_t epoch_ = 0;

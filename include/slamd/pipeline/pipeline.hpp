@@ -59,12 +59,20 @@
 #include "slamd/common/latency_histogram.hpp"
 #include "slamd/common/time.hpp"
 #include "slamd/pipeline/drop_oldest_queue.hpp"
+#include "slamd/pipeline/growing_spsc_queue.hpp"
 #include "slamd/pipeline/spsc_queue.hpp"
 #include "slamd/pipeline/wake_signal.hpp"
 
 namespace slamd {
 
-enum class EdgePolicy { kBackpressure, kDropOldest, kDrainToNewest };
+/// How an edge behaves when its consumer falls behind:
+/// - kBackpressure: the producer waits for room (datasets: nothing lost, runs repeatable);
+/// - kDropOldest: the oldest waiting item is dropped and counted (live frames);
+/// - kDrainToNewest: the consumer takes the newest item and skips the rest (mapping);
+/// - kGrowing: nothing is dropped and the producer never waits; the queue grows by a segment of
+///   `capacity` items at a time (a consumer that needs every item but must not hold up the
+///   latency-critical path; keep its items small).
+enum class EdgePolicy { kBackpressure, kDropOldest, kDrainToNewest, kGrowing };
 enum class PipelineMode { kThreaded, kSequential };
 
 const char* edgePolicyName(EdgePolicy policy);
@@ -149,17 +157,28 @@ class Edge {
     if (options.capacity == 0) throw std::invalid_argument("edge capacity must be at least 1");
     if (options.policy == EdgePolicy::kBackpressure) {
       blocking_queue_ = std::make_unique<SpscQueue<T>>(options.capacity);
+    } else if (options.policy == EdgePolicy::kGrowing) {
+      growing_queue_ = std::make_unique<GrowingSpscQueue<T>>(options.capacity);
     } else {
       evicting_queue_ = std::make_unique<DropOldestQueue<T>>(options.capacity);
     }
   }
 
+  /// Build time: a function applied to each item on the producer's thread before it waits in
+  /// this queue (to drop what this consumer does not need).
+  void setOnEnqueue(std::function<void(T&)> on_enqueue) { on_enqueue_ = std::move(on_enqueue); }
+
   /// Producer side. Returns false only when an abort made a backpressure push give up (the item
   /// is then counted as discarded).
   bool push(T item, const std::function<void()>& run_consumer_inline) {
     pushed_.fetch_add(1, std::memory_order_relaxed);
-    if (evicting_queue_) {
-      evicting_queue_->push(std::move(item));
+    if (on_enqueue_) on_enqueue_(item);
+    if (growing_queue_ || evicting_queue_) {
+      if (growing_queue_) {
+        growing_queue_->push(std::move(item));
+      } else {
+        evicting_queue_->push(std::move(item));
+      }
       data_signal_.notify();
       if (run_consumer_inline) run_consumer_inline();
       return true;
@@ -187,6 +206,8 @@ class Edge {
   void close() {
     if (blocking_queue_)
       blocking_queue_->close();
+    else if (growing_queue_)
+      growing_queue_->close();
     else
       evicting_queue_->close();
     data_signal_.notify();
@@ -198,6 +219,8 @@ class Edge {
     if (blocking_queue_) {
       item = blocking_queue_->tryPop();
       if (item) space_signal_.notify();
+    } else if (growing_queue_) {
+      item = growing_queue_->tryPop();
     } else {
       item = evicting_queue_->tryPop();
       if (item && options_.policy == EdgePolicy::kDrainToNewest) {
@@ -213,7 +236,8 @@ class Edge {
 
   /// Consumer side: true once closed and empty.
   bool drained() {
-    return blocking_queue_ ? blocking_queue_->drained() : evicting_queue_->drained();
+    if (blocking_queue_) return blocking_queue_->drained();
+    return growing_queue_ ? growing_queue_->drained() : evicting_queue_->drained();
   }
 
   /// Consumer side, blocking: the next item, or nullopt at end of stream or abort.
@@ -233,8 +257,9 @@ class Edge {
   /// Consumer side, after it stopped: counts whatever is left as discarded.
   void discardRemaining() {
     while (true) {
-      std::optional<T> item =
-          blocking_queue_ ? blocking_queue_->tryPop() : evicting_queue_->tryPop();
+      std::optional<T> item = blocking_queue_  ? blocking_queue_->tryPop()
+                              : growing_queue_ ? growing_queue_->tryPop()
+                                               : evicting_queue_->tryPop();
       if (!item) break;
       discarded_.fetch_add(1, std::memory_order_relaxed);
     }
@@ -250,7 +275,9 @@ class Edge {
     EdgeStats s;
     s.policy = edgePolicyName(options_.policy);
     s.capacity = options_.capacity;
-    s.depth = blocking_queue_ ? blocking_queue_->sizeApprox() : evicting_queue_->sizeApprox();
+    s.depth = blocking_queue_  ? blocking_queue_->sizeApprox()
+              : growing_queue_ ? growing_queue_->sizeApprox()
+                               : evicting_queue_->sizeApprox();
     s.pushed = pushed_.load(std::memory_order_relaxed);
     s.delivered = delivered_.load(std::memory_order_relaxed);
     s.dropped = drained_to_newest_.load(std::memory_order_relaxed) +
@@ -264,6 +291,8 @@ class Edge {
   RunControl* control_;
   std::unique_ptr<SpscQueue<T>> blocking_queue_;        // kBackpressure
   std::unique_ptr<DropOldestQueue<T>> evicting_queue_;  // kDropOldest, kDrainToNewest
+  std::unique_ptr<GrowingSpscQueue<T>> growing_queue_;  // kGrowing
+  std::function<void(T&)> on_enqueue_;
   WakeSignal data_signal_;   // producer -> consumer: an item or end of stream arrived
   WakeSignal space_signal_;  // consumer -> producer: a slot became free
   std::atomic<std::uint64_t> pushed_{0};
@@ -569,10 +598,13 @@ class Pipeline {
     return Outlet<Out>(&node->output(), this);
   }
 
+  /// `on_enqueue`, when given, is applied to each item on the producer's thread before it waits
+  /// in this sink's queue: a sink that needs less of an item than its other consumers (the back
+  /// end: no images of frames that are not keyframes) keeps its backlog small.
   template <typename In>
   void addSink(const std::string& name, Outlet<In> input, const EdgeOptions& edge,
-               std::function<void(In)> fn) {
-    addConsumer<In, void>(name, input, edge, std::move(fn));
+               std::function<void(In)> fn, std::function<void(In&)> on_enqueue = {}) {
+    addConsumer<In, void>(name, input, edge, std::move(fn), std::move(on_enqueue));
   }
 
   /// Threaded mode: starts one thread per node. Sequential mode: does nothing (call run()).
@@ -602,12 +634,14 @@ class Pipeline {
   template <typename In, typename Out>
   pipeline_detail::StageNode<In, Out>* addConsumer(
       const std::string& name, Outlet<In> input, const EdgeOptions& edge,
-      typename pipeline_detail::StageNode<In, Out>::Function fn) {
+      typename pipeline_detail::StageNode<In, Out>::Function fn,
+      std::function<void(In&)> on_enqueue = {}) {
     checkBuilding();
     if (input.port_ == nullptr || input.owner_ != this) {
       throw std::logic_error("stage '" + name + "' is connected to an outlet of another pipeline");
     }
     auto queue = std::make_shared<pipeline_detail::Edge<In>>(edge, &control_);
+    if (on_enqueue) queue->setOnEnqueue(std::move(on_enqueue));
     auto node = std::make_unique<pipeline_detail::StageNode<In, Out>>(name, &control_, queue,
                                                                       std::move(fn));
     auto* raw = node.get();
