@@ -35,7 +35,7 @@ std::optional<BackendCorrection> BackendStage::process(const EstimatedPacket& pa
   std::optional<BackendCorrection> correction;
   if (odometry.is_keyframe && odometry.keyframe) {
     // The graph takes the filter's pose: the published poses and the map are built from it.
-    auto keyframe = std::make_shared<Keyframe>(*odometry.keyframe);
+    auto keyframe = compactKeyframe(*odometry.keyframe, config_.align_patches);
     keyframe->T_world_camera = T_world_camera;
     // Measured straight against the previous keyframe: tracking's covariance of that step is the
     // odometry edge's uncertainty.
@@ -44,11 +44,16 @@ std::optional<BackendCorrection> BackendStage::process(const EstimatedPacket& pa
     const BackendUpdate update = measured_from_previous_keyframe
                                      ? backend_->addKeyframe(keyframe, odometry.covariance_ref_curr)
                                      : backend_->addKeyframe(keyframe);
-    ++stats_.keyframes;
     latest_keyframe_id_ = keyframe->id;
     frames_.addKeyframe(keyframe);
-    keyframes_.push_back(
-        KeyframePoseEntry{keyframe->id, keyframe->utime, keyframe->segment, T_world_camera});
+    if (update.culled) {
+      ++stats_.culled_keyframes;
+    } else {
+      keyframes_.push_back(
+          KeyframePoseEntry{keyframe->id, keyframe->utime, keyframe->segment, T_world_camera});
+      stats_.keyframe_bytes += static_cast<std::int64_t>(keyframeBytes(*keyframe));
+    }
+    stats_.keyframes = static_cast<std::int64_t>(backend_->graph().numNodes());
     if (update.optimized) correction = makeCorrection(update, keyframe->utime);
   }
   frames_.addFrame(odometry, T_world_camera);
@@ -67,6 +72,7 @@ BackendCorrection BackendStage::makeCorrection(const BackendUpdate& update, Utim
   correction.T_world_uncorrected = update.T_world_odometry;
   correction.keyframe_poses = update.corrected_poses;
   correction.relocalized = update.relocalized;
+  correction.culled = update.culled;
   KeyframeTrajectory& trajectory = correction.trajectory;
   trajectory.utime = utime;
   trajectory.sequence = sequence_++;

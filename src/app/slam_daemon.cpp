@@ -527,8 +527,8 @@ int SlamDaemon::Impl::run(ShutdownSignals& signals) {
   trajectory = std::move(steps->publish->trajectory());
   summarize(stats, source_stats, *bus, start_ns);
   logSummary(stats, source_stats, *bus);
-  const bool metrics_written = daemon.metrics_out.empty() || writeMetrics(stats);
   if (backend) finishBackend();
+  const bool metrics_written = daemon.metrics_out.empty() || writeMetrics(stats);
   const int outputs = writeOutputs();
   steps.reset();  // before the bus its frame publisher uses
   return outputs != kExitOk ? outputs : metrics_written ? kExitOk : kExitOutputError;
@@ -729,6 +729,19 @@ bool SlamDaemon::Impl::writeMetrics(const std::vector<StageStats>& stats) {
   json.key("end_to_end_p50_ms").value(summary.end_to_end_p50_ms);
   json.key("end_to_end_p95_ms").value(summary.end_to_end_p95_ms);
   json.key("end_to_end_p99_ms").value(summary.end_to_end_p99_ms);
+  if (backend) {
+    json.key("backend").beginObject();
+    json.key("keyframes").value(summary.keyframes);
+    json.key("culled_keyframes").value(summary.culled_keyframes);
+    json.key("keyframe_bytes").value(summary.keyframe_bytes);
+    json.key("bytes_per_keyframe")
+        .value(summary.keyframes > 0 ? summary.keyframe_bytes / summary.keyframes : 0);
+    json.key("loops").value(summary.loops);
+    json.key("relocalizations").value(summary.relocalizations);
+    json.key("optimizations").value(summary.optimizations);
+    json.key("max_optimization_ms").value(summary.max_optimization_ms);
+    json.endObject();
+  }
   json.key("stages").beginObject();
   for (const auto& stage : stats) {
     json.key(stage.name).beginObject();
@@ -762,14 +775,21 @@ void SlamDaemon::Impl::finishBackend() {
   summary.relocalizations = stats.relocalizations;
   summary.optimizations = stats.optimizations;
   summary.max_optimization_ms = stats.max_optimization_ms;
-  SLAMD_LOG_INFO(kLog) << "back end: " << stats.keyframes << " keyframes, " << stats.loops
-                       << " loops, " << stats.relocalizations << " relocalisations, "
-                       << stats.optimizations << " optimisations (longest "
+  summary.culled_keyframes = stats.culled_keyframes;
+  summary.keyframe_bytes = stats.keyframe_bytes;
+  SLAMD_LOG_INFO(kLog) << "back end: " << stats.keyframes << " keyframes ("
+                       << stats.culled_keyframes << " redundant ones culled; "
+                       << (stats.keyframes > 0 ? stats.keyframe_bytes / stats.keyframes / 1024 : 0)
+                       << " KiB each), " << stats.loops << " loops, " << stats.relocalizations
+                       << " relocalisations, " << stats.optimizations << " optimisations (longest "
                        << stats.max_optimization_ms << " ms)";
   // The written trajectory and map take the final optimised poses, including corrections that
   // arrived after the publish and mapping threads had finished.
   trajectory = backend->optimizedTrajectory();
   if (mapper && stats.optimizations > 0) {
+    for (const std::int64_t id : backend->backend().culledKeyframeIds()) {
+      mapper->forgetKeyframe(id);
+    }
     std::vector<std::pair<std::int64_t, SE3>> keyframe_poses;
     for (const std::int64_t id : backend->backend().graph().nodeIds()) {
       keyframe_poses.emplace_back(id, backend->backend().pose(id));

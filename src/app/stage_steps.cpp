@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <stdexcept>
+#include <unordered_set>
 
 #include "slamd/common/log.hpp"
 
@@ -281,6 +282,7 @@ void MappingStep::applyCorrections() {
   corrections_.take(resetEpoch(),
                     [&newest](MapCorrection item) { newest = std::move(item.correction); });
   if (!newest) return;
+  forgetCulledKeyframes(newest->keyframe_poses);
   T_world_uncorrected_ = newest->T_world_uncorrected;
   // Re-integrating every keyframe cloud costs about one frame's integration per keyframe: only
   // worth it when the correction moves the map by more than half a voxel.
@@ -293,6 +295,27 @@ void MappingStep::applyCorrections() {
   }
   SLAMD_LOG_INFO(kLog) << "map rebuilt from " << rebuilt.keyframes_integrated
                        << " keyframe clouds after a correction of up to " << shift_m << " m";
+}
+
+void MappingStep::forgetCulledKeyframes(
+    const std::vector<std::pair<std::int64_t, SE3>>& keyframe_poses) {
+  // A correction lists every keyframe the back end holds up to its newest (ids increase): a kept
+  // cloud older than that and not listed belongs to a keyframe the back end culled (or never
+  // took), which no correction will ever move again.
+  std::int64_t newest_id = -1;
+  std::unordered_set<std::int64_t> listed;
+  for (const auto& entry : keyframe_poses) {
+    newest_id = std::max(newest_id, entry.first);
+    listed.insert(entry.first);
+  }
+  for (auto it = keyframe_map_poses_.begin(); it != keyframe_map_poses_.end();) {
+    if (it->first < newest_id && listed.count(it->first) == 0) {
+      mapper_.forgetKeyframe(it->first);
+      it = keyframe_map_poses_.erase(it);
+    } else {
+      ++it;
+    }
+  }
 }
 
 void MappingStep::serveRequests() {

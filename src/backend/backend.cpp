@@ -171,9 +171,124 @@ void Backend::tryRelocalization(const Keyframe& keyframe, BackendUpdate& update)
   ++num_relocalizations_;
 }
 
+PoseGraphEdge Backend::odometryEdge(const Keyframe& keyframe, const Matrix6d* covariance_prev_curr,
+                                    bool new_segment, KeyframeInfo& info) const {
+  const SE3 T_prev_curr = previous_->T_world_camera.inverse() * keyframe.T_world_camera;
+  PoseGraphEdge edge{previous_->id, keyframe.id, T_prev_curr, odometryInformation(T_prev_curr),
+                     EdgeKind::kOdometry};
+  if (new_segment) {
+    edge.information = Matrix6d::Identity() / (kSegmentLinkSigma * kSegmentLinkSigma);
+  } else {
+    info.path_length_m =
+        keyframes_.at(previous_->id).path_length_m + T_prev_curr.translation().norm();
+    if (covariance_prev_curr != nullptr && covariance_prev_curr->allFinite()) {
+      Matrix6d covariance = 0.5 * (*covariance_prev_curr + covariance_prev_curr->transpose());
+      for (int k = 0; k < 3; ++k) covariance(k, k) += kTrackingFloorM * kTrackingFloorM;
+      for (int k = 3; k < 6; ++k) covariance(k, k) += kTrackingFloorRad * kTrackingFloorRad;
+      const Matrix6d information = covariance.inverse();
+      if (information.allFinite()) edge.information = 0.5 * (information + information.transpose());
+    }
+  }
+  const auto culled = culled_.find(previous_->id);
+  if (culled == culled_.end()) return edge;
+  // The previous keyframe was merged into its anchor: start the edge there.
+  const PoseGraphEdge anchor_to_previous{culled->second.anchor_id, previous_->id,
+                                         culled->second.T_anchor_keyframe,
+                                         culled->second.information, EdgeKind::kOdometry};
+  return composedEdge(anchor_to_previous, edge, EdgeKind::kOdometry);
+}
+
+SE3 Backend::pose(std::int64_t keyframe_id) const {
+  if (graph_.hasNode(keyframe_id)) return graph_.pose(keyframe_id);
+  const CulledKeyframe& culled = culled_.at(keyframe_id);
+  return graph_.pose(culled.anchor_id) * culled.T_anchor_keyframe;
+}
+
+std::vector<std::int64_t> Backend::culledKeyframeIds() const {
+  std::vector<std::int64_t> ids;
+  ids.reserve(culled_.size());
+  for (const auto& entry : culled_) ids.push_back(entry.first);
+  std::sort(ids.begin(), ids.end());
+  return ids;
+}
+
+const LoopDetection* Backend::redundancyMatch(const Keyframe& keyframe,
+                                              const std::vector<LoopDetection>& local) const {
+  // The keyframes that verifiably see this place now (enough inliers, still in the graph).
+  std::vector<const LoopDetection*> covering;
+  for (const LoopDetection& match : local) {
+    if (match.num_inliers >= config_.cull_min_inliers && graph_.hasNode(match.match_id)) {
+      covering.push_back(&match);
+    }
+  }
+  if (static_cast<int>(covering.size()) < config_.cull_min_covering_keyframes) return nullptr;
+  // ORB-SLAM's rule with views for landmarks: a feature with depth is covered by a keyframe
+  // whose view it lies in (in front, inside the image) at the same or a finer scale (at most one
+  // ORB pyramid level, 1.2x, farther away).
+  constexpr double kMaxDepthRatio = 1.2;
+  constexpr double kBorderPx = 8.0;
+  const CameraIntrinsics& K = keyframe.intrinsics;
+  const FeatureSet& features = keyframe.features;
+  int with_depth = 0;
+  int covered = 0;
+  for (std::size_t i = 0; i < features.points.size(); ++i) {
+    if (!features.hasDepth(i)) continue;
+    ++with_depth;
+    const Eigen::Vector3d& X = features.points[i];
+    int views = 0;
+    for (const LoopDetection* match : covering) {
+      const Eigen::Vector3d Y = match->T_match_query * X;
+      if (!(Y.z() > 0.0) || Y.z() > kMaxDepthRatio * X.z()) continue;
+      const double u = K.fx * Y.x() / Y.z() + K.cx;
+      const double v = K.fy * Y.y() / Y.z() + K.cy;
+      if (u >= kBorderPx && v >= kBorderPx && u < K.width - kBorderPx && v < K.height - kBorderPx) {
+        ++views;
+      }
+    }
+    if (views >= config_.cull_min_covering_keyframes) ++covered;
+  }
+  if (with_depth == 0 ||
+      static_cast<double>(covered) < config_.cull_min_covered_ratio * with_depth) {
+    return nullptr;
+  }
+  // Merged into the one that sees it best.
+  return *std::max_element(covering.begin(), covering.end(),
+                           [](const LoopDetection* a, const LoopDetection* b) {
+                             return a->num_inliers < b->num_inliers;
+                           });
+}
+
+void Backend::cull(const Keyframe& keyframe, const LoopDetection& match, BackendUpdate& update) {
+  // The offset kept is the optimised one (odometry and every local edge fused), not the single
+  // match; its information is the match's (a conservative bound).
+  const SE3 T_match_keyframe = graph_.pose(match.match_id).inverse() * graph_.pose(keyframe.id);
+  const std::vector<PoseGraphEdge> removed = graph_.removeNode(keyframe.id);
+  for (const PoseGraphEdge& edge : removed) {
+    const std::int64_t other = edge.from_id == keyframe.id ? edge.to_id : edge.from_id;
+    auto& list = neighbours_[other];
+    list.erase(std::remove(list.begin(), list.end(), keyframe.id), list.end());
+  }
+  neighbours_.erase(keyframe.id);
+  detector_.removeKeyframe(keyframe.id);
+  const PoseGraphEdge match_to_keyframe{match.match_id, keyframe.id, T_match_keyframe,
+                                        match.information, EdgeKind::kLocal};
+  // Its odometry edge and a loop edge go on to the keyframe it was merged into (the chain stays
+  // connected, the loop stays closed). Its local edges are dropped: the keyframe it merges into
+  // has its own, and composed with the same match they would count it many times over.
+  const PoseGraphEdge keyframe_to_match = invertedEdge(match_to_keyframe);
+  for (const PoseGraphEdge& edge : removed) {
+    const bool carried = edge.kind == EdgeKind::kOdometry || edge.kind == EdgeKind::kLoop;
+    if (!carried || edge.to_id != keyframe.id || edge.from_id == match.match_id) continue;
+    addEdge(composedEdge(edge, keyframe_to_match, edge.kind));
+  }
+  culled_[keyframe.id] = CulledKeyframe{match.match_id, T_match_keyframe, match.information};
+  update.culled = true;
+  update.culled_into_id = match.match_id;
+}
+
 BackendUpdate Backend::add(const KeyframePtr& keyframe, const Matrix6d* covariance_prev_curr) {
   BackendUpdate update;
-  if (keyframe == nullptr || graph_.hasNode(keyframe->id)) return update;
+  if (keyframe == nullptr || hasKeyframe(keyframe->id)) return update;
   update.keyframe_id = keyframe->id;
   KeyframeInfo info;
   info.segment = keyframe->segment;
@@ -182,28 +297,11 @@ BackendUpdate Backend::add(const KeyframePtr& keyframe, const Matrix6d* covarian
     graph_.addNode(keyframe->id, keyframe->T_world_camera);
     first_segment_ = keyframe->segment;
   } else {
-    // Initial value: the previous keyframe's corrected pose composed with the odometry step.
-    const SE3 T_prev_curr = previous_->T_world_camera.inverse() * keyframe->T_world_camera;
-    graph_.addNode(keyframe->id, graph_.pose(previous_->id) * T_prev_curr);
-    PoseGraphEdge edge{previous_->id, keyframe->id, T_prev_curr, odometryInformation(T_prev_curr),
-                       EdgeKind::kOdometry};
     new_segment = keyframe->segment != previous_->segment;
-    if (new_segment) {
-      edge.information = Matrix6d::Identity() / (kSegmentLinkSigma * kSegmentLinkSigma);
-      relocalization_attempts_ = 0;
-    } else {
-      info.path_length_m =
-          keyframes_.at(previous_->id).path_length_m + T_prev_curr.translation().norm();
-      if (covariance_prev_curr != nullptr && covariance_prev_curr->allFinite()) {
-        Matrix6d covariance = 0.5 * (*covariance_prev_curr + covariance_prev_curr->transpose());
-        for (int k = 0; k < 3; ++k) covariance(k, k) += kTrackingFloorM * kTrackingFloorM;
-        for (int k = 3; k < 6; ++k) covariance(k, k) += kTrackingFloorRad * kTrackingFloorRad;
-        const Matrix6d information = covariance.inverse();
-        if (information.allFinite()) {
-          edge.information = 0.5 * (information + information.transpose());
-        }
-      }
-    }
+    if (new_segment) relocalization_attempts_ = 0;
+    const PoseGraphEdge edge = odometryEdge(*keyframe, covariance_prev_curr, new_segment, info);
+    // Initial value: the corrected pose at the edge's start composed with the odometry step.
+    graph_.addNode(keyframe->id, graph_.pose(edge.from_id) * edge.T_from_to);
     addEdge(edge);
   }
   keyframes_[keyframe->id] = info;
@@ -223,6 +321,7 @@ BackendUpdate Backend::add(const KeyframePtr& keyframe, const Matrix6d* covarian
   full = full || update.full_optimization;
   changed = changed || (config_.optimize_every_keyframe && update.num_local_edges > 0);
 
+  const std::int64_t previous_id_before = previous_ != nullptr ? previous_->id : -1;
   previous_ = keyframe;
   update.loop = detector_.processKeyframe(*keyframe, local);
   const PoseGraphEdge loop_edge{update.loop.match_id, update.loop.query_id,
@@ -255,15 +354,28 @@ BackendUpdate Backend::add(const KeyframePtr& keyframe, const Matrix6d* covarian
       update.optimization = graph_.optimize(options, localWindow(keyframe->id));
     }
     update.optimized = true;
-    update.corrected_poses.reserve(graph_.numNodes());
-    for (std::int64_t id : graph_.nodeIds())
-      update.corrected_poses.emplace_back(id, graph_.pose(id));
   } else {
     update.full_optimization = false;
   }
+  // Culling comes after the optimisation: the culled keyframe keeps its optimised offset.
+  const bool first_of_segment = previous_id_before == -1 || new_segment;
+  const LoopDetection* redundant =
+      config_.cull_redundant_keyframes && !first_of_segment && !update.relocalized &&
+              segmentRoot(keyframe->segment) == segmentRoot(first_segment_)
+          ? redundancyMatch(*keyframe, local)
+          : nullptr;
+  if (redundant != nullptr) {
+    cull(*keyframe, *redundant, update);
+    update.optimized = true;  // the keyframe list changed: downstream must hear of it
+  }
+  if (update.optimized) {
+    update.corrected_poses.reserve(graph_.numNodes());
+    for (std::int64_t id : graph_.nodeIds())
+      update.corrected_poses.emplace_back(id, graph_.pose(id));
+  }
   // After the loop search too: a loop into the map also joins a new segment.
   update.relocalization_pending = segmentRoot(keyframe->segment) != segmentRoot(first_segment_);
-  update.T_world_odometry = graph_.pose(keyframe->id) * keyframe->T_world_camera.inverse();
+  update.T_world_odometry = pose(keyframe->id) * keyframe->T_world_camera.inverse();
   return update;
 }
 

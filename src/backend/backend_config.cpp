@@ -113,6 +113,18 @@ const ConfigSchema<BackendConfig>& BackendConfig::schema() {
           .number("full_optimization_chi2", &C::full_optimization_chi2, 0.0, 1e12, "",
                   "a loop edge, or a local edge beyond the window, whose whitened squared error "
                   "exceeds this re-optimises the whole graph")
+          .flag("cull_redundant_keyframes", &C::cull_redundant_keyframes,
+                "remove a new keyframe whose features other keyframes already see (ORB-SLAM's "
+                "rule, see cull_*); its odometry and loop edges are merged into the keyframe "
+                "that sees it best, its frames stay anchored through that keyframe")
+          .number("cull_min_inliers", &C::cull_min_inliers, 6, 100000, "",
+                  "inliers of a verified local match for that keyframe to count as seeing the "
+                  "new keyframe's place")
+          .number("cull_min_covering_keyframes", &C::cull_min_covering_keyframes, 1, 50,
+                  "keyframes", "a feature is covered when this many such keyframes see it")
+          .number("cull_min_covered_ratio", &C::cull_min_covered_ratio, 0.0, 1.0, "",
+                  "a keyframe is redundant when this fraction of its features with depth is "
+                  "covered")
           .flag("relocalization", &C::relocalization,
                 "match a keyframe that starts a new tracking segment (after LOST) against every "
                 "earlier segment's keyframes; a match ties the segment back into the map")

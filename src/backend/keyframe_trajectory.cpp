@@ -6,15 +6,15 @@ namespace slamd {
 
 void KeyframeAnchoredTrajectory::addKeyframe(const KeyframePtr& keyframe) {
   if (keyframe == nullptr) return;
-  keyframes_[keyframe->id] = keyframe;
-  latest_ = keyframe;
+  keyframes_[keyframe->id] = Anchor{keyframe->segment, keyframe->T_world_camera};
+  latest_id_ = keyframe->id;
 }
 
 void KeyframeAnchoredTrajectory::addFrame(const OdometryResult& result, const SE3& T_world_camera) {
-  if (latest_ == nullptr) return;
-  std::int64_t anchor = latest_->id;
+  if (latest_id_ < 0) return;
+  std::int64_t anchor = latest_id_;
   const auto it = keyframes_.find(result.reference_keyframe_id);
-  if (it != keyframes_.end() && it->second->segment == result.segment) anchor = it->first;
+  if (it != keyframes_.end() && it->second.segment == result.segment) anchor = it->first;
   frames_.push_back({utimeToSeconds(result.utime), anchor, T_world_camera});
 }
 
@@ -29,8 +29,9 @@ Trajectory KeyframeAnchoredTrajectory::corrected(const Backend& backend) const {
   Trajectory out;
   out.reserve(frames_.size());
   for (const Frame& f : frames_) {
-    const Keyframe& kf = *keyframes_.at(f.keyframe_id);
-    const SE3 T_world_kf = backend.graph().hasNode(kf.id) ? backend.pose(kf.id) : kf.T_world_camera;
+    const Anchor& kf = keyframes_.at(f.keyframe_id);
+    const SE3 T_world_kf =
+        backend.hasKeyframe(f.keyframe_id) ? backend.pose(f.keyframe_id) : kf.T_world_camera;
     out.push_back({f.t_s, T_world_kf * kf.T_world_camera.inverse() * f.T_world_camera});
   }
   return out;

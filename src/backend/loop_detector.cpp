@@ -336,11 +336,36 @@ LoopDetection LoopDetector::processKeyframe(const Keyframe& keyframe,
     detection.num_inliers = best.num_inliers;
   }
 
+  // A removed entry kept its BoW only while it was the latest (the score threshold above).
+  if (!entries_.empty() && entries_.back().removed) entries_.back().bow = BowVector();
   const int entry = static_cast<int>(entries_.size());
   entries_.push_back({keyframe.id, keyframe.segment, keyframe.T_world_camera, path_length_m, bow,
                       keyframe.features});
   for (const auto& [word, weight] : bow) inverted_[word].emplace_back(entry, weight);
   return done();
+}
+
+bool LoopDetector::removeKeyframe(std::int64_t id) {
+  const auto found = std::find_if(entries_.begin(), entries_.end(),
+                                  [id](const Entry& e) { return e.id == id && !e.removed; });
+  if (found == entries_.end()) return false;
+  const int entry = static_cast<int>(found - entries_.begin());
+  for (const auto& [word, weight] : found->bow) {
+    const auto it = inverted_.find(word);
+    if (it == inverted_.end()) continue;
+    auto& postings = it->second;
+    postings.erase(
+        std::remove_if(postings.begin(), postings.end(),
+                       [entry](const std::pair<int, double>& p) { return p.first == entry; }),
+        postings.end());
+    if (postings.empty()) inverted_.erase(it);
+  }
+  found->features = FeatureSet();
+  found->removed = true;
+  // The latest entry's BoW still sets the next keyframe's score threshold.
+  if (entry + 1 != static_cast<int>(entries_.size())) found->bow = BowVector();
+  ++num_removed_;
+  return true;
 }
 
 LoopDetection LoopDetector::query(const FeatureSet& features, const CameraIntrinsics& intrinsics) {

@@ -1,7 +1,9 @@
 #include "slamd/backend/pose_graph.hpp"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <iterator>
 #include <limits>
 
 // GCC 12 reports a false -Wnull-dereference inside Eigen's sparse headers when
@@ -139,6 +141,57 @@ bool PoseGraph::addEdge(const PoseGraphEdge& edge) {
 }
 
 void PoseGraph::setFixed(std::int64_t id, bool fixed) { fixed_[index_.at(id)] = fixed; }
+
+std::vector<PoseGraphEdge> PoseGraph::removeNode(std::int64_t id) {
+  std::vector<PoseGraphEdge> removed;
+  const auto it = index_.find(id);
+  if (it == index_.end()) return removed;
+  const auto position = static_cast<std::size_t>(it->second);
+  const auto names = [id](const PoseGraphEdge& edge) {
+    return edge.from_id == id || edge.to_id == id;
+  };
+  std::copy_if(edges_.begin(), edges_.end(), std::back_inserter(removed), names);
+  edges_.erase(std::remove_if(edges_.begin(), edges_.end(), names), edges_.end());
+  const auto offset = static_cast<std::ptrdiff_t>(position);
+  ids_.erase(ids_.begin() + offset);
+  poses_.erase(poses_.begin() + offset);
+  fixed_.erase(fixed_.begin() + offset);
+  index_.erase(it);
+  for (std::size_t n = position; n < ids_.size(); ++n) index_[ids_[n]] = static_cast<int>(n);
+  return removed;
+}
+
+namespace {
+
+Matrix6d covarianceOf(const PoseGraphEdge& edge) {
+  const Matrix6d covariance = edge.information.inverse();
+  return 0.5 * (covariance + covariance.transpose());
+}
+
+Matrix6d informationOf(const Matrix6d& covariance) {
+  const Matrix6d information = covariance.inverse();
+  return 0.5 * (information + information.transpose());
+}
+
+}  // namespace
+
+PoseGraphEdge invertedEdge(const PoseGraphEdge& edge) {
+  const Matrix6d ad = adjointSE3(edge.T_from_to);
+  PoseGraphEdge out{edge.to_id, edge.from_id, edge.T_from_to.inverse(), Matrix6d::Identity(),
+                    edge.kind};
+  out.information = informationOf(ad * covarianceOf(edge) * ad.transpose());
+  return out;
+}
+
+PoseGraphEdge composedEdge(const PoseGraphEdge& a_to_b, const PoseGraphEdge& b_to_c,
+                           EdgeKind kind) {
+  const Matrix6d ad = adjointSE3(b_to_c.T_from_to.inverse());
+  PoseGraphEdge out{a_to_b.from_id, b_to_c.to_id, a_to_b.T_from_to * b_to_c.T_from_to,
+                    Matrix6d::Identity(), kind};
+  out.information =
+      informationOf(ad * covarianceOf(a_to_b) * ad.transpose() + covarianceOf(b_to_c));
+  return out;
+}
 
 namespace {
 

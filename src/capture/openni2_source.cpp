@@ -443,12 +443,26 @@ bool OpenNi2Source::reachedEndOfRecording() const {
   if (kind_ != Kind::kFile || s.depth_frames_total < 0) return false;
   const bool depth_done = s.last_depth_index >= s.depth_frames_total;
   const bool color_done = !s.has_color || s.last_color_index >= s.color_frames_total;
-  return depth_done && color_done && !s.pending_depth.isValid();
+  // A depth frame still pending here has no colour partner left to come (a pending pair would
+  // have been delivered or split already): endOfRecording() counts it.
+  return depth_done && color_done;
+}
+
+FrameRead OpenNi2Source::endOfRecording() {
+  // In real-time playback the player may hand the last colour image to an earlier depth frame
+  // (the PrimeSense file's two frames are 0.4 ms apart); the last depth frame then never gets a
+  // partner. It is counted, not lost silently, and only once: reading on gives the end again.
+  Impl& s = *impl_;
+  if (s.pending_depth.isValid()) {
+    s.pending_depth.release();
+    countLostDepthFrame();
+  }
+  return FrameRead{FrameRead::Status::kEndOfStream, {}, {}};
 }
 
 FrameRead OpenNi2Source::declareStalled(SteadyTime now) {
   // A recording that stops delivering has ended; a device has gone: close it and reopen later.
-  if (kind_ == Kind::kFile) return FrameRead{FrameRead::Status::kEndOfStream, {}, {}};
+  if (kind_ == Kind::kFile) return endOfRecording();
   Impl& s = *impl_;
   s.closeAll();
   s.disconnected = true;
@@ -560,7 +574,7 @@ FrameRead OpenNi2Source::next(std::chrono::milliseconds timeout) {
   const auto frame_timeout = std::chrono::duration_cast<std::chrono::steady_clock::duration>(
       std::chrono::duration<double>(config_.frame_timeout_s));
   while (true) {
-    if (reachedEndOfRecording()) return FrameRead{FrameRead::Status::kEndOfStream, {}, {}};
+    if (reachedEndOfRecording()) return endOfRecording();
     const auto now = std::chrono::steady_clock::now();
     if (now - s.last_frame_time > frame_timeout) return declareStalled(now);
     if (now >= deadline) return FrameRead{FrameRead::Status::kTimeout, {}, {}};
@@ -575,7 +589,7 @@ FrameRead OpenNi2Source::next(std::chrono::milliseconds timeout) {
         openni::OpenNI::waitForAnyStream(streams, s.has_color ? 2 : 1, &index, wait_ms);
     if (status == openni::STATUS_TIME_OUT) continue;
     if (status != openni::STATUS_OK || index < 0) {
-      if (kind_ == Kind::kFile) return FrameRead{FrameRead::Status::kEndOfStream, {}, {}};
+      if (kind_ == Kind::kFile) return endOfRecording();
       // Treated like a stall: the next pass finds last_frame_time too old unless a frame comes.
       std::this_thread::sleep_until(std::min(deadline, now + std::chrono::milliseconds(5)));
       continue;

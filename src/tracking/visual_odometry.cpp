@@ -547,6 +547,39 @@ SE3 VisualOdometry::alignRotation(const cv::Mat& small_curr, const CameraIntrins
   return T;
 }
 
+std::shared_ptr<Keyframe> compactKeyframe(const Keyframe& keyframe, bool keep_alignment_image) {
+  auto compact = std::make_shared<Keyframe>(keyframe);
+  compact->frame.reset();
+  compact->features.gray = cv::Mat();
+  if (!keep_alignment_image) compact->features.align_gray = cv::Mat();
+  return compact;
+}
+
+std::size_t keyframeBytes(const Keyframe& keyframe) {
+  std::vector<const void*> counted;
+  std::size_t bytes = 0;
+  const auto image = [&](const cv::Mat& m) {
+    if (m.empty() || std::find(counted.begin(), counted.end(), m.datastart) != counted.end()) {
+      return;
+    }
+    counted.push_back(m.datastart);
+    bytes += static_cast<std::size_t>(m.dataend - m.datastart);
+  };
+  const FeatureSet& f = keyframe.features;
+  bytes += f.keypoints.size() * sizeof(cv::KeyPoint) + f.pixels.size() * sizeof(Eigen::Vector2d) +
+           f.points.size() * sizeof(Eigen::Vector3d) + f.scale.size() * sizeof(float) +
+           f.inverse_depth_gradient.size() * sizeof(Eigen::Vector2d);
+  image(f.descriptors);
+  image(f.gray);
+  image(f.align_gray);
+  if (keyframe.frame) {
+    image(keyframe.frame->color_bgr);
+    image(keyframe.frame->gray);
+    image(keyframe.frame->depth_m);
+  }
+  return bytes;
+}
+
 KeyframePtr VisualOdometry::makeKeyframe(const CurrentFrame& curr, const RgbdFrame& frame,
                                          const RgbdFramePtr& frame_ptr, const SE3& T_world_camera) {
   auto kf = std::make_shared<Keyframe>();

@@ -25,6 +25,16 @@ struct RenderedKeyframes {
   std::vector<SE3, Eigen::aligned_allocator<SE3>> truth;  ///< T_world_camera per keyframe
 };
 
+// A true keyframe step as odometry measures it: 2% translation noise and 0.3 degree rotation
+// noise (drift).
+SE3 noisyStep(const SE3& step_true, std::mt19937& rng, std::normal_distribution<double>& noise) {
+  Vector6d xi;
+  const double step_m = step_true.translation().norm();
+  for (int k = 0; k < 3; ++k) xi(k) = 0.02 * step_m * noise(rng);
+  for (int k = 3; k < 6; ++k) xi(k) = 0.3 * M_PI / 180.0 * noise(rng);
+  return step_true * expSE3(xi);
+}
+
 RenderedKeyframes renderKeyframes(const std::string& scene, int step, int max_keyframes) {
   cv::setNumThreads(1);
   Config config = Config::fromFile(std::string(SLAMD_SOURCE_DIR) + "/config/synthetic.yaml");
@@ -50,12 +60,8 @@ RenderedKeyframes renderKeyframes(const std::string& scene, int step, int max_ke
     if (out.keyframes.empty()) {
       T_world_odometry = T_world_true;
     } else {
-      const SE3 step_true = T_world_prev_true.inverse() * T_world_true;
-      Vector6d xi;
-      const double step_m = step_true.translation().norm();
-      for (int k = 0; k < 3; ++k) xi(k) = 0.02 * step_m * noise(rng);
-      for (int k = 3; k < 6; ++k) xi(k) = 0.3 * M_PI / 180.0 * noise(rng);
-      T_world_odometry = T_world_odometry * step_true * expSE3(xi);
+      T_world_odometry =
+          T_world_odometry * noisyStep(T_world_prev_true.inverse() * T_world_true, rng, noise);
     }
     T_world_prev_true = T_world_true;
     keyframe->T_world_camera = T_world_odometry;
@@ -363,6 +369,132 @@ TEST(LoopDetector, RejectsNonBinaryDescriptors) {
   keyframe.features.descriptors = cv::Mat(10, 128, CV_32F, cv::Scalar(0));
   EXPECT_EQ(detector.processKeyframe(keyframe).status, LoopStatus::kUnsupportedDescriptors);
   EXPECT_EQ(detector.size(), 0u);
+}
+
+// A camera that goes over the same ground again and again (a robot patrolling, fr1/xyz's desk):
+// the room's first keyframes forward, backward, forward, ... as new keyframes with new ids and
+// odometry that keeps drifting (the true steps with the noise of renderKeyframes).
+struct PingPong {
+  std::vector<KeyframePtr> keyframes;
+  std::vector<SE3, Eigen::aligned_allocator<SE3>> truth;
+  std::vector<int> lap;  ///< lap of each keyframe, from 0
+};
+
+PingPong pingPong(const RenderedKeyframes& lap, int laps) {
+  std::mt19937 rng(11);
+  std::normal_distribution<double> noise(0.0, 1.0);
+  PingPong out;
+  SE3 T_world_odometry = lap.truth.front();
+  SE3 T_world_prev_true = lap.truth.front();
+  const int n = static_cast<int>(lap.keyframes.size());
+  for (int k = 0; k < laps; ++k) {
+    for (int i = 0; i < n; ++i) {
+      const int index = k % 2 == 0 ? i : n - 1 - i;
+      if (k > 0 && i == 0) continue;  // the turn: the same view is not a new keyframe
+      const SE3& T_world_true = lap.truth[static_cast<std::size_t>(index)];
+      if (!out.keyframes.empty()) {
+        T_world_odometry =
+            T_world_odometry * noisyStep(T_world_prev_true.inverse() * T_world_true, rng, noise);
+      }
+      T_world_prev_true = T_world_true;
+      auto keyframe = std::make_shared<Keyframe>(*lap.keyframes[static_cast<std::size_t>(index)]);
+      keyframe->id = static_cast<std::int64_t>(out.keyframes.size());
+      keyframe->T_world_camera = T_world_odometry;
+      out.keyframes.push_back(keyframe);
+      out.truth.push_back(T_world_true);
+      out.lap.push_back(k);
+    }
+  }
+  return out;
+}
+
+struct CullingRun {
+  std::vector<std::size_t> keyframes_after_lap;  ///< graph nodes at the end of each lap
+  int culled = 0;
+  double rms_error_m = 0.0;  ///< every keyframe (culled ones through backend.pose)
+};
+
+CullingRun runPingPong(const PingPong& run, bool cull) {
+  BackendConfig config;
+  config.cull_redundant_keyframes = cull;
+  Backend backend(config, roomVocabulary());
+  CullingRun out;
+  for (std::size_t k = 0; k < run.keyframes.size(); ++k) {
+    const BackendUpdate update = backend.addKeyframe(run.keyframes[k]);
+    if (update.culled) {
+      ++out.culled;
+      EXPECT_TRUE(backend.graph().hasNode(update.culled_into_id));
+      EXPECT_FALSE(backend.graph().hasNode(run.keyframes[k]->id));
+      EXPECT_TRUE(backend.hasKeyframe(run.keyframes[k]->id));
+      for (const auto& entry : update.corrected_poses) EXPECT_NE(entry.first, update.keyframe_id);
+    }
+    if (k + 1 == run.keyframes.size() || run.lap[k + 1] != run.lap[k]) {
+      out.keyframes_after_lap.push_back(backend.graph().numNodes());
+    }
+  }
+  // The graph stays one connected chain: optimising the whole of it converges.
+  PoseGraph graph = backend.graph();
+  EXPECT_NE(graph.optimize(PoseGraphOptions()).status, OptimizationStatus::kSolverFailure);
+  double sum = 0.0;
+  for (std::size_t k = 0; k < run.keyframes.size(); ++k) {
+    const double e =
+        (backend.pose(run.keyframes[k]->id).translation() - run.truth[k].translation()).norm();
+    sum += e * e;
+  }
+  out.rms_error_m = std::sqrt(sum / static_cast<double>(run.keyframes.size()));
+  EXPECT_EQ(backend.numCulled(), out.culled);
+  EXPECT_EQ(backend.graph().numNodes() + static_cast<std::size_t>(out.culled),
+            run.keyframes.size());
+  return out;
+}
+
+TEST(Backend, RevisitingTheSamePlaceAddsNoKeyframesWhenRedundantOnesAreCulled) {
+  const RenderedKeyframes lap = renderKeyframes("room", 5, 40);
+  const PingPong run = pingPong(lap, 4);
+  const CullingRun culled = runPingPong(run, true);
+  const CullingRun kept = runPingPong(run, false);
+  std::printf("room ping-pong, %zu keyframes over 4 laps: graph after each lap",
+              run.keyframes.size());
+  for (std::size_t n : culled.keyframes_after_lap) std::printf(" %zu", n);
+  std::printf(" (culled %d); without culling", culled.culled);
+  for (std::size_t n : kept.keyframes_after_lap) std::printf(" %zu", n);
+  std::printf("; RMS keyframe error %.4f m culled, %.4f m kept\n", culled.rms_error_m,
+              kept.rms_error_m);
+  ASSERT_EQ(culled.keyframes_after_lap.size(), 4u);
+  // Without culling every lap adds its keyframes; with it, laps 3 and 4 add at most 10% to what
+  // lap 2 left (issue 24's target for fr1/xyz played back and forth).
+  EXPECT_EQ(kept.keyframes_after_lap.back(), run.keyframes.size());
+  EXPECT_LE(static_cast<double>(culled.keyframes_after_lap.back()),
+            1.1 * static_cast<double>(culled.keyframes_after_lap[1]));
+  EXPECT_LT(culled.keyframes_after_lap[1], kept.keyframes_after_lap[1]);
+  EXPECT_GT(culled.culled, 0);
+  // What a culled keyframe held is still in the map: every keyframe's pose, culled or not, is
+  // as good as without culling (within a centimetre).
+  EXPECT_LT(culled.rms_error_m, kept.rms_error_m + 0.01);
+}
+
+TEST(LoopDetector, ARemovedKeyframeIsNeverReturnedAgain) {
+  const RenderedKeyframes& world = ringKeyframes();
+  LoopDetector detector(BackendConfig(), roomVocabulary());
+  for (std::size_t k = 0; k < 10; ++k) detector.processKeyframe(*world.keyframes[k]);
+  const Keyframe& probe = *world.keyframes[5];
+  const LoopDetection before = detector.query(probe.features, probe.intrinsics);
+  ASSERT_EQ(before.status, LoopStatus::kLoopFound);
+  ASSERT_EQ(before.match_id, probe.id);
+  EXPECT_TRUE(detector.removeKeyframe(probe.id));
+  EXPECT_FALSE(detector.removeKeyframe(probe.id)) << "removed twice";
+  EXPECT_FALSE(detector.removeKeyframe(12345)) << "never stored";
+  EXPECT_EQ(detector.size(), 10u);
+  EXPECT_EQ(detector.numSearchable(), 9u);
+  const LoopDetection after = detector.query(probe.features, probe.intrinsics);
+  EXPECT_NE(after.match_id, probe.id);
+  const std::vector<LoopDetection> local =
+      detector.matchLocal(probe, [](std::int64_t, std::int64_t) { return true; });
+  for (const LoopDetection& d : local) EXPECT_NE(d.match_id, probe.id);
+  // Keyframes added after a removal are found as before.
+  detector.processKeyframe(*world.keyframes[10]);
+  EXPECT_EQ(detector.query(world.keyframes[10]->features, world.keyframes[10]->intrinsics).match_id,
+            world.keyframes[10]->id);
 }
 
 }  // namespace

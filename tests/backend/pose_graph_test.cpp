@@ -277,5 +277,70 @@ TEST(BackendConfig, ReadsAndValidatesKeys) {
   EXPECT_THROW(BackendConfig::load(bad_kernel), ConfigError);
 }
 
+TEST(PoseGraph, RemovingANodeTakesItsEdgesAndKeepsTheOthers) {
+  PoseGraph graph;
+  for (int id = 0; id < 4; ++id) {
+    graph.addNode(id, SE3(Eigen::Translation3d(static_cast<double>(id), 0.0, 0.0)));
+  }
+  const SE3 step(Eigen::Translation3d(1.0, 0.0, 0.0));
+  for (int id = 0; id + 1 < 4; ++id) graph.addEdge({id, id + 1, step, Matrix6d::Identity()});
+  graph.addEdge({0, 2, step * step, Matrix6d::Identity(), EdgeKind::kLocal});
+  const std::vector<PoseGraphEdge> removed = graph.removeNode(2);
+  ASSERT_EQ(removed.size(), 3u);
+  EXPECT_FALSE(graph.hasNode(2));
+  EXPECT_EQ(graph.numNodes(), 3u);
+  EXPECT_EQ(graph.numEdges(), 1u);
+  EXPECT_TRUE(graph.removeNode(2).empty()) << "removed twice";
+  // The nodes after the removed one keep their poses (the index was rebuilt).
+  EXPECT_NEAR(graph.pose(3).translation().x(), 3.0, 1e-12);
+  EXPECT_TRUE(graph.isFixed(0));
+  EXPECT_FALSE(graph.isFixed(3));
+  EXPECT_FALSE(graph.addEdge({1, 2, step, Matrix6d::Identity()}));
+  EXPECT_TRUE(graph.addEdge({1, 3, step * step, Matrix6d::Identity()}));
+  EXPECT_NE(graph.optimize(PoseGraphOptions()).status, OptimizationStatus::kInvalidGraph);
+}
+
+TEST(PoseGraph, ComposedAndInvertedEdgesCarryMeasurementAndCovariance) {
+  std::mt19937 rng(5);
+  const SE3 T_ab = expSE3((Vector6d() << 0.4, -0.1, 0.2, 0.1, 0.3, -0.2).finished());
+  const SE3 T_bc = expSE3((Vector6d() << -0.2, 0.5, 0.1, -0.2, 0.1, 0.4).finished());
+  Vector6d sigma_ab;
+  sigma_ab << 0.01, 0.02, 0.015, 0.01, 0.005, 0.02;
+  Vector6d sigma_bc;
+  sigma_bc << 0.02, 0.01, 0.01, 0.003, 0.01, 0.008;
+  const PoseGraphEdge ab{0, 1, T_ab, sigma_ab.cwiseAbs2().cwiseInverse().asDiagonal()};
+  const PoseGraphEdge bc{1, 2, T_bc, sigma_bc.cwiseAbs2().cwiseInverse().asDiagonal()};
+  const PoseGraphEdge ac = composedEdge(ab, bc, EdgeKind::kLoop);
+  EXPECT_EQ(ac.from_id, 0);
+  EXPECT_EQ(ac.to_id, 2);
+  EXPECT_EQ(ac.kind, EdgeKind::kLoop);
+  EXPECT_TRUE((ac.T_from_to.matrix() - (T_ab * T_bc).matrix()).isZero(1e-12));
+  const PoseGraphEdge back = invertedEdge(invertedEdge(ab));
+  EXPECT_TRUE((back.T_from_to.matrix() - T_ab.matrix()).isZero(1e-12));
+  EXPECT_TRUE((back.information - ab.information).isZero(1e-6 * ab.information.norm()));
+  // Monte Carlo: perturb both measurements on the right with their covariances; the composed
+  // measurement's right perturbations must have the composed covariance.
+  std::normal_distribution<double> normal(0.0, 1.0);
+  Matrix6d sample_covariance = Matrix6d::Zero();
+  const SE3 T_ac_inverse = ac.T_from_to.inverse();
+  constexpr int kSamples = 20000;
+  for (int n = 0; n < kSamples; ++n) {
+    Vector6d d_ab;
+    Vector6d d_bc;
+    for (int k = 0; k < 6; ++k) {
+      d_ab(k) = sigma_ab(k) * normal(rng);
+      d_bc(k) = sigma_bc(k) * normal(rng);
+    }
+    const Vector6d e = logSE3(T_ac_inverse * (T_ab * expSE3(d_ab)) * (T_bc * expSE3(d_bc)));
+    sample_covariance += e * e.transpose() / kSamples;
+  }
+  const Matrix6d covariance = ac.information.inverse();
+  for (int k = 0; k < 6; ++k) {
+    EXPECT_NEAR(std::sqrt(sample_covariance(k, k)), std::sqrt(covariance(k, k)),
+                0.05 * std::sqrt(covariance(k, k)))
+        << "axis " << k;
+  }
+}
+
 }  // namespace
 }  // namespace slamd

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include <gtest/gtest.h>
+#include <opencv2/imgproc.hpp>
 
 #include "textured_box.hpp"
 
@@ -255,6 +256,41 @@ TEST(MotionLimits, ViolationsNameTheLimitAndNoiseWidensThem) {
   EXPECT_DOUBLE_EQ(TrackingConfig::load(config).motion_limits.max_speed_mps, 1.5);
   Config bad = Config::fromYamlString("filter:\n  max_angular_rate_radps: 0\n");
   EXPECT_THROW(TrackingConfig::load(bad), ConfigError);
+}
+
+TEST(CompactKeyframe, KeepsFeaturesAndTheAlignmentImageOnlyAndCountsBytes) {
+  auto frame = std::make_shared<RgbdFrame>();
+  frame->color_bgr = cv::Mat(480, 640, CV_8UC3, cv::Scalar(1, 2, 3));
+  frame->gray = cv::Mat(480, 640, CV_8UC1, cv::Scalar(7));
+  frame->depth_m = cv::Mat(480, 640, CV_32FC1, cv::Scalar(1.5f));
+  Keyframe keyframe;
+  keyframe.id = 7;
+  keyframe.frame = frame;
+  FeatureSet& f = keyframe.features;
+  for (int i = 0; i < 500; ++i) {
+    f.keypoints.emplace_back(static_cast<float>(i), 10.0f, 7.0f);
+    f.pixels.emplace_back(static_cast<double>(i), 10.0);
+    f.points.emplace_back(0.0, 0.0, 1.5);
+    f.scale.push_back(1.0f);
+  }
+  f.descriptors = cv::Mat(500, 32, CV_8UC1, cv::Scalar(0));
+  f.gray = frame->gray;  // shared with the frame: counted once
+  cv::GaussianBlur(frame->gray, f.align_gray, cv::Size(5, 5), 1.0);
+  const std::size_t feature_bytes = 500 * (sizeof(cv::KeyPoint) + sizeof(Eigen::Vector2d) +
+                                           sizeof(Eigen::Vector3d) + sizeof(float)) +
+                                    500 * 32;
+  const std::size_t image_bytes = 640 * 480 * (3 + 1 + 4) + 640 * 480;  // frame + align_gray
+  EXPECT_EQ(keyframeBytes(keyframe), feature_bytes + image_bytes);
+
+  const auto compact = compactKeyframe(keyframe, true);
+  EXPECT_EQ(compact->id, 7);
+  EXPECT_EQ(compact->frame, nullptr);
+  EXPECT_TRUE(compact->features.gray.empty());
+  EXPECT_EQ(compact->features.align_gray.data, f.align_gray.data) << "shared, not copied";
+  EXPECT_EQ(compact->features.size(), 500u);
+  EXPECT_EQ(keyframeBytes(*compact), feature_bytes + 640 * 480);
+  EXPECT_EQ(keyframeBytes(*compactKeyframe(keyframe, false)), feature_bytes);
+  EXPECT_NE(keyframe.frame, nullptr) << "the original keeps its images";
 }
 
 }  // namespace

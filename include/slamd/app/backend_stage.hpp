@@ -8,7 +8,9 @@
 // optimised keyframe trajectory (published on SLAMD_KEYFRAMES).
 //
 // Every tracked frame is remembered as (keyframe, pose relative to it), so that at the end the
-// whole trajectory can be written at its optimised poses, not only the keyframes.
+// whole trajectory can be written at its optimised poses, not only the keyframes. The back end
+// keeps keyframes without their images (compactKeyframe); culled keyframes leave the graph and
+// the published keyframe list, their frames stay anchored through the keyframe that covers them.
 //
 // No threads inside; owned by the back-end thread, then by the control thread after the pipeline
 // stopped. process() never throws on bad data.
@@ -29,6 +31,9 @@ namespace slamd {
 
 /// What one pose-graph optimisation changes downstream.
 struct BackendCorrection {
+  /// The keyframe of this correction was culled (mapping forgets its cloud: keyframe_poses lists
+  /// every keyframe the back end holds up to its newest).
+  bool culled = false;
   /// Uncorrected world (filter) -> corrected world, for every pose after this keyframe.
   SE3 T_world_uncorrected = SE3::Identity();
   /// Every keyframe's optimised T_world_camera, for Mapper::rebuild().
@@ -39,7 +44,9 @@ struct BackendCorrection {
 };
 
 struct BackendStageStats {
-  std::int64_t keyframes = 0;
+  std::int64_t keyframes = 0;         ///< in the graph now (culled ones not counted)
+  std::int64_t culled_keyframes = 0;  ///< redundant keyframes removed
+  std::int64_t keyframe_bytes = 0;    ///< held by the back end's keyframes (keyframeBytes)
   std::int64_t loops = 0;
   std::int64_t local_edges = 0;
   std::int64_t relocalizations = 0;

@@ -76,7 +76,9 @@ struct DaemonSummary {
   std::uint64_t malformed_commands = 0;
   std::uint64_t commands_refused = 0;  ///< SAVE_MAP naming a file outside daemon.save_dir
   // Back end (zero when backend.enabled is false).
-  std::int64_t keyframes = 0;
+  std::int64_t keyframes = 0;         ///< in the graph at the end
+  std::int64_t culled_keyframes = 0;  ///< redundant keyframes removed
+  std::int64_t keyframe_bytes = 0;    ///< held by the back end's keyframes at the end
   std::int64_t loops = 0;
   std::int64_t relocalizations = 0;
   std::int64_t optimizations = 0;

@@ -348,6 +348,8 @@ class MappingStep : public StepBase {
 
  private:
   void applyCorrections();
+  /// Forgets the kept clouds of keyframes a correction no longer lists (culled by the back end).
+  void forgetCulledKeyframes(const std::vector<std::pair<std::int64_t, SE3>>& keyframe_poses);
   void publishOutputs(const MapperOutputs& outputs);
 
   Mapper& mapper_;

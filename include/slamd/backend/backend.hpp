@@ -32,6 +32,17 @@
 // within backend.local_window_hops edges); a loop or relocalisation that is far from closed
 // re-optimises the whole graph. corrected_poses lists every keyframe either way.
 //
+// Culling (backend.cull_redundant_keyframes): a new keyframe is redundant when the earlier
+// keyframes whose verified local matches show they see its place already hold what it holds
+// (ORB-SLAM's rule, with views for landmarks: see BackendConfig). It is removed at once, after
+// the optimisation that placed it: its node and edges leave the graph, its loop-detector entry
+// is dropped, and it stays only as an offset (the optimised one) from the keyframe M that sees
+// it best. Its odometry edge and a loop edge it closed are merged through that offset into edges
+// of M (composedEdge), and the next keyframe's odometry edge starts from M the same way, so the
+// chain stays connected. pose() of a culled keyframe is M's pose composed with the offset. Only
+// the newest keyframe is ever culled, so M is never culled later. Not culled: the first keyframe
+// of a segment, one that relocalised, one of a segment not yet joined to the map.
+//
 // Relocalisation (backend.relocalization): a keyframe starting a new segment (after LOST) is tied
 // to the previous one by a very weak edge only, and matched against every keyframe of earlier
 // segments (LoopDetector::query, no recency exclusion or consistency). On a verified match a
@@ -73,6 +84,9 @@ struct BackendUpdate {
   int relocalization_attempts = 0;
   /// The keyframe's segment is not (yet) joined to the map of the first segment.
   bool relocalization_pending = false;
+  /// This keyframe was culled (redundant with culled_into_id); it is not in corrected_poses.
+  bool culled = false;
+  std::int64_t culled_into_id = -1;
   /// Every keyframe's corrected T_world_camera (metres), when optimized.
   std::vector<std::pair<std::int64_t, SE3>> corrected_poses;
   /// Correction from the odometry world to the corrected world (see the class comment).
@@ -93,8 +107,16 @@ class Backend {
   /// 1 mm / 0.05 degree). Ignored for the first keyframe of a segment.
   BackendUpdate addKeyframe(const KeyframePtr& keyframe, const Matrix6d& covariance_prev_curr);
 
-  /// Current (corrected) T_world_camera of a keyframe; the odometry pose before any loop.
-  SE3 pose(std::int64_t keyframe_id) const { return graph_.pose(keyframe_id); }
+  /// Current (corrected) T_world_camera of a keyframe; the odometry pose before any loop. A
+  /// culled keyframe's is the pose of the keyframe it was merged into, composed with the offset
+  /// measured between them. Throws std::out_of_range for an id never added.
+  SE3 pose(std::int64_t keyframe_id) const;
+  /// The keyframe was added (culled or not).
+  bool hasKeyframe(std::int64_t keyframe_id) const {
+    return graph_.hasNode(keyframe_id) || culled_.count(keyframe_id) != 0;
+  }
+  int numCulled() const { return static_cast<int>(culled_.size()); }
+  std::vector<std::int64_t> culledKeyframeIds() const;
   const PoseGraph& graph() const { return graph_; }
   const LoopDetector& loopDetector() const { return detector_; }
   LoopDetector& loopDetector() { return detector_; }
@@ -105,6 +127,12 @@ class Backend {
   std::int64_t segmentRoot(std::int64_t segment) const;
 
  private:
+  /// A culled keyframe: merged into anchor_id, at T_anchor_keyframe (measured) from it.
+  struct CulledKeyframe {
+    std::int64_t anchor_id = -1;
+    SE3 T_anchor_keyframe = SE3::Identity();
+    Matrix6d information = Matrix6d::Identity();  ///< of T_anchor_keyframe
+  };
   struct KeyframeInfo {
     std::int64_t segment = 0;
     double path_length_m = 0.0;  ///< odometry path from the first keyframe of its segment
@@ -121,6 +149,16 @@ class Backend {
   std::vector<std::int64_t> localWindow(std::int64_t keyframe_id) const;
   /// Whitened squared error of an edge at the current estimate.
   double edgeChi2(const PoseGraphEdge& edge) const;
+  /// The odometry edge from the previous keyframe to this one; from the keyframe the previous
+  /// one was merged into when it was culled.
+  PoseGraphEdge odometryEdge(const Keyframe& keyframe, const Matrix6d* covariance_prev_curr,
+                             bool new_segment, KeyframeInfo& info) const;
+  /// The verified local match that makes the keyframe redundant, if any (most inliers first).
+  const LoopDetection* redundancyMatch(const Keyframe& keyframe,
+                                       const std::vector<LoopDetection>& local) const;
+  /// Removes the keyframe from the graph and the loop detector, merging its odometry edge into
+  /// the keyframe of `match`.
+  void cull(const Keyframe& keyframe, const LoopDetection& match, BackendUpdate& update);
 
   BackendConfig config_;
   PoseGraphOptions options_;
@@ -130,6 +168,7 @@ class Backend {
   std::unordered_map<std::int64_t, KeyframeInfo> keyframes_;
   std::unordered_map<std::int64_t, std::vector<std::int64_t>> neighbours_;  ///< graph adjacency
   std::unordered_map<std::int64_t, std::int64_t> segment_parent_;  ///< joined segments (union-find)
+  std::unordered_map<std::int64_t, CulledKeyframe> culled_;
   std::int64_t first_segment_ = 0;
   int relocalization_attempts_ = 0;  ///< attempts of the latest segment
   int num_loops_ = 0;

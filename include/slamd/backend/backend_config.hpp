@@ -81,6 +81,18 @@ struct BackendConfig {
   double full_optimization_chi2 = 50.0;
   int local_max_iterations = 10;
 
+  // --- Keyframe culling ------------------------------------------------------------------------
+  /// A new keyframe is redundant, and culled, when the earlier keyframes that verifiably see its
+  /// place hold what it holds: ORB-SLAM's rule (90% of a keyframe's points seen by at least 3
+  /// other keyframes), with views for landmarks. A feature with depth counts as seen by a
+  /// keyframe whose verified local match (at least cull_min_inliers inliers) puts it inside that
+  /// keyframe's image, in front, at most 1.2x (one ORB level) farther away. Revisiting a place
+  /// then adds no keyframes; only new ground does.
+  bool cull_redundant_keyframes = true;
+  int cull_min_inliers = 100;
+  int cull_min_covering_keyframes = 3;
+  double cull_min_covered_ratio = 0.9;
+
   // --- Relocalisation -------------------------------------------------------------------------
   bool relocalization = true;
   int relocalization_min_inliers = 40;

@@ -13,6 +13,9 @@
 //     trajectory.addFrame(r);
 //   Trajectory slam = trajectory.corrected(backend);   // T_world_camera per frame, seconds
 //
+// A keyframe the back end culled keeps its frames: its corrected pose is the one the back end
+// gives it through the keyframe it was merged into.
+//
 // Frames before the first keyframe are skipped.
 
 #include <cstdint>
@@ -45,8 +48,14 @@ class KeyframeAnchoredTrajectory {
     std::int64_t keyframe_id = -1;
     SE3 T_world_camera = SE3::Identity();  ///< odometry
   };
-  std::unordered_map<std::int64_t, KeyframePtr> keyframes_;
-  KeyframePtr latest_;
+  /// What a frame's pose is stored against: only the keyframe's odometry pose and segment (the
+  /// keyframe itself, and its images, are not kept).
+  struct Anchor {
+    std::int64_t segment = 0;
+    SE3 T_world_camera = SE3::Identity();  ///< odometry
+  };
+  std::unordered_map<std::int64_t, Anchor> keyframes_;
+  std::int64_t latest_id_ = -1;
   std::vector<Frame> frames_;
 };
 

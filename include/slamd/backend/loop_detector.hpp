@@ -103,7 +103,15 @@ class LoopDetector {
   std::vector<LoopDetection> matchLocal(const Keyframe& keyframe, const KeyframeFilter& allowed,
                                         const PosePrior& prior = PosePrior());
 
+  /// Forgets a stored keyframe (culled by the back end): no search returns it any more and its
+  /// features are released. Its place in the order of keyframes stays (the recent-keyframe
+  /// exclusion and path lengths count it). Returns false for an unknown or removed id.
+  bool removeKeyframe(std::int64_t id);
+
+  /// Stored entries, removed ones included.
   std::size_t size() const { return entries_.size(); }
+  /// Entries that searches can return.
+  std::size_t numSearchable() const { return entries_.size() - num_removed_; }
 
  private:
   struct Entry {
@@ -112,7 +120,8 @@ class LoopDetector {
     SE3 T_world_camera = SE3::Identity();  ///< odometry pose when added
     double path_length_m = 0.0;            ///< distance travelled from the first keyframe
     BowVector bow;
-    FeatureSet features;  ///< shares the descriptor and image buffers with the keyframe
+    FeatureSet features;   ///< shares the descriptor and image buffers with the keyframe
+    bool removed = false;  ///< removeKeyframe(): out of the index, features released
   };
   struct Candidate {
     int entry = -1;
@@ -141,6 +150,7 @@ class LoopDetector {
   std::vector<Entry> entries_;
   std::unordered_map<int, std::vector<std::pair<int, double>>> inverted_;  ///< word -> (entry, w)
   std::vector<Group> groups_;  ///< places verified by the previous keyframe
+  std::size_t num_removed_ = 0;
   std::mt19937 rng_{42};
 };
 

@@ -90,6 +90,10 @@ class PoseGraph {
   bool addEdge(const PoseGraphEdge& edge);
   /// Fixes or frees a node (fixed nodes keep their pose; at least one should be fixed).
   void setFixed(std::int64_t id, bool fixed);
+  bool isFixed(std::int64_t id) const { return fixed_[static_cast<std::size_t>(index_.at(id))]; }
+  /// Removes a node and every edge that names it; returns those edges (in addEdge order).
+  /// Nothing happens (and nothing is returned) for an unknown id.
+  std::vector<PoseGraphEdge> removeNode(std::int64_t id);
 
   bool hasNode(std::int64_t id) const { return index_.count(id) != 0; }
   const SE3& pose(std::int64_t id) const { return poses_[index_.at(id)]; }
@@ -126,6 +130,15 @@ class PoseGraph {
 Vector6d poseGraphEdgeError(const SE3& T_from_to_measured, const SE3& T_world_i,
                             const SE3& T_world_j, Matrix6d* jacobian_i = nullptr,
                             Matrix6d* jacobian_j = nullptr);
+
+/// The edge b -> a measuring the same relative pose as a -> b: Z^-1, with the covariance
+/// carried to the other end (right perturbations: Sigma' = Ad(Z) Sigma Ad(Z)^T).
+PoseGraphEdge invertedEdge(const PoseGraphEdge& edge);
+
+/// The edge a -> c through b from the edges a -> b and b -> c (b's pose eliminated): Z_ab * Z_bc,
+/// covariance Ad(Z_bc^-1) Sigma_ab Ad(Z_bc^-1)^T + Sigma_bc (the two measurements taken as
+/// independent). `kind` is the kind of the result.
+PoseGraphEdge composedEdge(const PoseGraphEdge& a_to_b, const PoseGraphEdge& b_to_c, EdgeKind kind);
 
 /// Inverse of the right Jacobian of SE(3) at xi = [rho; phi]:
 /// log(exp(xi) * exp(delta)) = xi + rightJacobianInverseSE3(xi) * delta + O(|delta|^2).

@@ -108,6 +108,8 @@ class OpenNi2Source : public FrameSource {
   /// Nothing when the device is open (or was reopened now); a timeout while it stays closed.
   std::optional<FrameRead> reopenIfDisconnected(SteadyTime deadline);
   bool reachedEndOfRecording() const;
+  /// The end of a recording: a depth frame still waiting for colour is counted as lost.
+  FrameRead endOfRecording();
   FrameRead declareStalled(SteadyTime now);
   void countLostDepthFrame();
   /// Whether the pending depth frame has its colour partner (dropping an unpaired older one).

@@ -64,6 +64,16 @@ struct Keyframe {
 };
 using KeyframePtr = std::shared_ptr<const Keyframe>;
 
+/// What the back end keeps of a keyframe: a copy without the frame's images and without the
+/// grey image the features came from. Keypoints, descriptors, undistorted pixels, 3D points and
+/// poses stay; so does the smoothed grey image (features.align_gray) when keep_alignment_image
+/// (the back end aligns patches of it to make its edges sub-pixel: backend.align_patches).
+std::shared_ptr<Keyframe> compactKeyframe(const Keyframe& keyframe, bool keep_alignment_image);
+
+/// Bytes held by a keyframe's buffers: feature vectors, descriptors and images (a buffer that two
+/// fields share counted once).
+std::size_t keyframeBytes(const Keyframe& keyframe);
+
 struct OdometryStats {
   int num_features = 0;  ///< features detected in the current frame
   int num_features_with_depth = 0;
