@@ -53,8 +53,9 @@ run_slamd 150 slamd-2.log
 # The run is over once slamd-pose-log has the second run's poses and the live page has reported
 # twice more with the same pose and voxel counts (it reports every second, after slamd-web's
 # last 10 Hz tick).
-wait_for 20 "slamd-pose-log to receive the second run's poses" \
-  test "$(grep -vc '^#' poses.txt)" -ge 140
+# (A function: the count is read again on every poll, not once when wait_for is called.)
+second_run_logged() { [ "$(grep -vc '^#' poses.txt)" -ge 140 ]; }
+wait_for 20 "slamd-pose-log to receive the second run's poses" second_run_logged
 reports_at_end=$(wc -l < client-stats.jsonl)
 live_page_settled() {
   [ "$(wc -l < client-stats.jsonl)" -ge $((reports_at_end + 2)) ] || return 1
