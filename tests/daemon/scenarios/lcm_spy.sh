@@ -22,6 +22,14 @@ for file in "$SLAMD_SOURCE_DIR"/lcmtypes/*.lcm; do
 done
 check "slamd-lcmtypes.jar holds a class for each of the $types types in lcmtypes/"
 
+# The project's exit codes: 0 after --help (lcm-spy's own help exits 1), 2 on a bad option.
+"$SLAMD_BIN/slamd-spy" --help > help.txt 2>&1 || fail "slamd-spy --help exited with $?"
+grep -q -- "--lcm-url" help.txt || fail "slamd-spy --help does not list lcm-spy's options"
+rc=0
+"$SLAMD_BIN/slamd-spy" --no-such-option > /dev/null 2>&1 || rc=$?
+[ "$rc" -eq 2 ] || fail "slamd-spy --no-such-option exited with $rc, not 2"
+check "slamd-spy --help exits 0 and lists lcm-spy's options; a bad option exits 2"
+
 # An X server of our own; lcm-spy with slamd's types on it.
 Xvfb -displayfd 3 -screen 0 1280x900x24 -nolisten tcp 3> display.txt 2> xvfb.err &
 wait_for 20 "Xvfb to start" test -s display.txt
