@@ -126,6 +126,57 @@ void BM_OptimizeDesk(benchmark::State& state) {
   state.counters["iterations"] = result.iterations;
   state.counters["ms_per_iteration"] = result.time_ms / std::max(1, result.iterations);
 }
+// The back end's optimisation after each new keyframe (issue 24: at most 50 ms p99 whatever the
+// graph's size): a graph of N keyframes explored along a ring (5 cm apart, no loop yet), each
+// tied by odometry and 6 local edges to the keyframes just before it. The newest keyframe is
+// moved 2 cm off (its fresh odometry) and its local window (the newest 40 keyframes, at most 10
+// iterations, as backend.local_window_size and local_max_iterations) is optimised.
+void BM_LocalWindowPerKeyframe(benchmark::State& state) {
+  const int n = static_cast<int>(state.range(0));
+  std::mt19937 rng(42);
+  PoseGraph graph = makeGraph(n);
+  // Drop the ring's loops: keep odometry, add local edges to the previous 2..7 keyframes.
+  PoseGraph explored;
+  for (std::int64_t id : graph.nodeIds()) explored.addNode(id, graph.pose(id));
+  Vector6d information_diagonal;
+  information_diagonal << Eigen::Vector3d::Constant(1.0 / (0.005 * 0.005)),
+      Eigen::Vector3d::Constant(1.0 / (0.003 * 0.003));
+  const Matrix6d information = information_diagonal.asDiagonal();
+  for (const PoseGraphEdge& edge : graph.edges()) {
+    if (edge.kind == EdgeKind::kOdometry) explored.addEdge(edge);
+  }
+  for (int k = 2; k < n; ++k) {
+    for (int back = 2; back <= 7 && back <= k; ++back) {
+      const SE3 Z =
+          explored.pose(k - back).inverse() * explored.pose(k) * expSE3(noise(rng, 0.005, 0.003));
+      explored.addEdge({k - back, k, Z, information, EdgeKind::kLocal});
+    }
+  }
+  std::vector<std::int64_t> window;
+  for (int k = std::max(0, n - 40); k < n; ++k) window.push_back(k);
+  PoseGraphOptions options;
+  options.max_iterations = 10;
+  const SE3 newest = explored.pose(n - 1);
+  PoseGraphResult result;
+  for (auto _ : state) {
+    state.PauseTiming();
+    explored.setPose(n - 1, newest * expSE3(noise(rng, 0.02, 0.01)));
+    state.ResumeTiming();
+    result = explored.optimize(options, window);
+    benchmark::DoNotOptimize(result.final_cost);
+  }
+  state.counters["nodes"] = n;
+  state.counters["edges"] = result.num_edges;
+  state.counters["iterations"] = result.iterations;
+}
+BENCHMARK(BM_LocalWindowPerKeyframe)
+    ->Arg(100)
+    ->Arg(1000)
+    ->Arg(5000)
+    ->Repetitions(5)
+    ->ReportAggregatesOnly(true)
+    ->Unit(benchmark::kMillisecond);
+
 BENCHMARK(BM_OptimizeDesk)
     ->Args({100, 0})
     ->Args({300, 0})

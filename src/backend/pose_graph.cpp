@@ -203,14 +203,7 @@ bool isRobust(const PoseGraphEdge& edge, const PoseGraphOptions& options) {
 
 double PoseGraph::cost(const PoseGraphOptions& options) const {
   double total = 0.0;
-  for (const PoseGraphEdge& edge : edges_) {
-    const Vector6d e = poseGraphEdgeError(edge.T_from_to, poses_[index_.at(edge.from_id)],
-                                          poses_[index_.at(edge.to_id)]);
-    const double s = e.dot(edge.information * e);
-    total += isRobust(edge, options)
-                 ? robustCost(options.robust_kernel, options.robust_kernel_width, s, nullptr)
-                 : s;
-  }
+  for (const PoseGraphEdge& edge : edges_) total += edgeCost(edge, options, nullptr);
   return total;
 }
 
@@ -228,47 +221,72 @@ PoseGraphResult PoseGraph::optimize(const PoseGraphOptions& options,
   return result;
 }
 
+double PoseGraph::edgeCost(const PoseGraphEdge& edge, const PoseGraphOptions& options,
+                           double* weight) const {
+  const Vector6d e = poseGraphEdgeError(edge.T_from_to, poses_[index_.at(edge.from_id)],
+                                        poses_[index_.at(edge.to_id)]);
+  const double s = e.dot(edge.information * e);
+  if (weight != nullptr) *weight = 1.0;
+  return isRobust(edge, options)
+             ? robustCost(options.robust_kernel, options.robust_kernel_width, s, weight)
+             : s;
+}
+
+double PoseGraph::activeCost(const PoseGraphOptions& options,
+                             const std::vector<std::size_t>& active) const {
+  double total = 0.0;
+  for (std::size_t k : active) total += edgeCost(edges_[k], options, nullptr);
+  return total;
+}
+
 PoseGraphResult PoseGraph::optimize(const PoseGraphOptions& options) {
   using Clock = std::chrono::steady_clock;
   const auto start = Clock::now();
   PoseGraphResult result;
   result.num_nodes = static_cast<int>(ids_.size());
   result.num_edges = static_cast<int>(edges_.size());
-  result.initial_cost = cost(options);
-  bool has_free_node = false;
-  for (bool fixed : fixed_) has_free_node = has_free_node || !fixed;
+  // Only edges with a free end change: LM works on those alone, so a local window costs the
+  // same in a graph of 100 keyframes as in one of 5000. The held edges' cost and weight are
+  // constant and taken once.
+  std::vector<std::size_t> active;
+  double held_cost = 0.0;
+  result.edge_weights.assign(edges_.size(), 1.0);
+  for (std::size_t k = 0; k < edges_.size(); ++k) {
+    const PoseGraphEdge& edge = edges_[k];
+    if (!fixed_[static_cast<std::size_t>(index_.at(edge.from_id))] ||
+        !fixed_[static_cast<std::size_t>(index_.at(edge.to_id))]) {
+      active.push_back(k);
+    } else {
+      held_cost += edgeCost(edge, options, &result.edge_weights[k]);
+    }
+  }
+  result.initial_cost = held_cost + activeCost(options, active);
   OptimizationStatus status = OptimizationStatus::kInvalidGraph;
-  if (has_free_node && !edges_.empty()) {
+  if (!active.empty()) {
     if (options.robust_kernel == RobustKernel::kCauchy) {
       // Cauchy is not convex: loop edges whose error is large only because of odometry drift
       // would be switched off from the start. A Huber (convex) solve first closes the true loops;
       // Cauchy then rejects the edges that still disagree with everything else.
       PoseGraphOptions warm_start = options;
       warm_start.robust_kernel = RobustKernel::kHuber;
-      status = levenbergMarquardt(warm_start, options.max_iterations, result.iterations);
+      status = levenbergMarquardt(warm_start, active, options.max_iterations, result.iterations);
     }
     if (status != OptimizationStatus::kSolverFailure) {
-      status = levenbergMarquardt(options, options.max_iterations - result.iterations,
+      status = levenbergMarquardt(options, active, options.max_iterations - result.iterations,
                                   result.iterations);
     }
   }
   result.status = status;
-  result.final_cost = cost(options);
-  for (const PoseGraphEdge& edge : edges_) {
-    const Vector6d e = poseGraphEdgeError(edge.T_from_to, poses_[index_.at(edge.from_id)],
-                                          poses_[index_.at(edge.to_id)]);
-    double w = 1.0;
-    if (isRobust(edge, options)) {
-      robustCost(options.robust_kernel, options.robust_kernel_width, e.dot(edge.information * e),
-                 &w);
-    }
-    result.edge_weights.push_back(w);
+  result.final_cost = held_cost;
+  for (std::size_t k : active) {
+    result.final_cost += edgeCost(edges_[k], options, &result.edge_weights[k]);
   }
   result.time_ms = std::chrono::duration<double, std::milli>(Clock::now() - start).count();
   return result;
 }
 
 OptimizationStatus PoseGraph::levenbergMarquardt(const PoseGraphOptions& options,
+                                                 const std::vector<std::size_t>& active,
                                                  int max_iterations, int& iterations) {
   // Free nodes get consecutive variable blocks; fixed nodes get -1.
   std::vector<int> block(ids_.size(), -1);
@@ -281,9 +299,9 @@ OptimizationStatus PoseGraph::levenbergMarquardt(const PoseGraphOptions& options
   Eigen::CholmodSupernodalLLT<Eigen::SparseMatrix<double>, Eigen::Lower> solver;
   bool pattern_analysed = false;
   double lambda = options.initial_lambda;
-  double current_cost = cost(options);
+  double current_cost = activeCost(options, active);
   std::vector<Eigen::Triplet<double>> triplets;
-  triplets.reserve(edges_.size() * 3 * 36 + static_cast<std::size_t>(dim));
+  triplets.reserve(active.size() * 3 * 36 + static_cast<std::size_t>(dim));
   Eigen::VectorXd gradient(dim);
   Eigen::SparseMatrix<double> H(dim, dim);
 
@@ -305,10 +323,10 @@ OptimizationStatus PoseGraph::levenbergMarquardt(const PoseGraphOptions& options
     if (relinearise) {
       triplets.clear();
       gradient.setZero();
-      for (const PoseGraphEdge& edge : edges_) {
+      for (std::size_t k : active) {
+        const PoseGraphEdge& edge = edges_[k];
         const int ni = index_.at(edge.from_id);
         const int nj = index_.at(edge.to_id);
-        if (block[ni] < 0 && block[nj] < 0) continue;  // both held: a constant
         Matrix6d Ji, Jj;
         const Vector6d e = poseGraphEdgeError(edge.T_from_to, poses_[ni], poses_[nj], &Ji, &Jj);
         double w = 1.0;
@@ -364,13 +382,15 @@ OptimizationStatus PoseGraph::levenbergMarquardt(const PoseGraphOptions& options
       continue;
     }
 
-    const auto saved = poses_;
+    std::vector<SE3, Eigen::aligned_allocator<SE3>> saved;  // the free poses, in block order
+    saved.reserve(static_cast<std::size_t>(num_free));
     for (std::size_t n = 0; n < ids_.size(); ++n) {
       if (block[n] >= 0) {
+        saved.push_back(poses_[n]);
         poses_[n] = normalizedSE3(poses_[n] * expSE3(step.segment<6>(6 * block[n])));
       }
     }
-    const double new_cost = cost(options);
+    const double new_cost = activeCost(options, active);
     if (new_cost < current_cost) {
       const double decrease = (current_cost - new_cost) / std::max(current_cost, 1e-300);
       current_cost = new_cost;
@@ -382,7 +402,9 @@ OptimizationStatus PoseGraph::levenbergMarquardt(const PoseGraphOptions& options
         break;
       }
     } else {
-      poses_ = saved;
+      for (std::size_t n = 0; n < ids_.size(); ++n) {
+        if (block[n] >= 0) poses_[n] = saved[static_cast<std::size_t>(block[n])];
+      }
       lambda *= 5.0;
       if (step.lpNorm<Eigen::Infinity>() < options.step_tolerance || lambda > 1e12) {
         // No descent direction left at any damping: the current poses are a minimum.

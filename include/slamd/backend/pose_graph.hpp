@@ -115,8 +115,14 @@ class PoseGraph {
   double cost(const PoseGraphOptions& options) const;
 
  private:
-  OptimizationStatus levenbergMarquardt(const PoseGraphOptions& options, int max_iterations,
+  /// LM over the free nodes, linearising and costing only the `active` edges (indices into
+  /// edges_ with at least one free end).
+  OptimizationStatus levenbergMarquardt(const PoseGraphOptions& options,
+                                        const std::vector<std::size_t>& active, int max_iterations,
                                         int& iterations);
+  /// An edge's robust cost at the current poses; its IRLS weight in *weight when not null.
+  double edgeCost(const PoseGraphEdge& edge, const PoseGraphOptions& options, double* weight) const;
+  double activeCost(const PoseGraphOptions& options, const std::vector<std::size_t>& active) const;
 
   std::vector<std::int64_t> ids_;
   std::vector<SE3, Eigen::aligned_allocator<SE3>> poses_;
