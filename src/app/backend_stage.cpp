@@ -72,7 +72,6 @@ BackendCorrection BackendStage::makeCorrection(const BackendUpdate& update, Utim
   correction.T_world_uncorrected = update.T_world_odometry;
   correction.keyframe_poses = update.corrected_poses;
   correction.relocalized = update.relocalized;
-  correction.culled = update.culled;
   KeyframeTrajectory& trajectory = correction.trajectory;
   trajectory.utime = utime;
   trajectory.sequence = sequence_++;

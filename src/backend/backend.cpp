@@ -293,7 +293,8 @@ BackendUpdate Backend::add(const KeyframePtr& keyframe, const Matrix6d* covarian
   KeyframeInfo info;
   info.segment = keyframe->segment;
   bool new_segment = false;
-  if (previous_ == nullptr) {
+  const bool first_keyframe = previous_ == nullptr;
+  if (first_keyframe) {
     graph_.addNode(keyframe->id, keyframe->T_world_camera);
     first_segment_ = keyframe->segment;
   } else {
@@ -321,7 +322,6 @@ BackendUpdate Backend::add(const KeyframePtr& keyframe, const Matrix6d* covarian
   full = full || update.full_optimization;
   changed = changed || (config_.optimize_every_keyframe && update.num_local_edges > 0);
 
-  const std::int64_t previous_id_before = previous_ != nullptr ? previous_->id : -1;
   previous_ = keyframe;
   update.loop = detector_.processKeyframe(*keyframe, local);
   const PoseGraphEdge loop_edge{update.loop.match_id, update.loop.query_id,
@@ -358,7 +358,7 @@ BackendUpdate Backend::add(const KeyframePtr& keyframe, const Matrix6d* covarian
     update.full_optimization = false;
   }
   // Culling comes after the optimisation: the culled keyframe keeps its optimised offset.
-  const bool first_of_segment = previous_id_before == -1 || new_segment;
+  const bool first_of_segment = first_keyframe || new_segment;
   const LoopDetection* redundant =
       config_.cull_redundant_keyframes && !first_of_segment && !update.relocalized &&
               segmentRoot(keyframe->segment) == segmentRoot(first_segment_)

@@ -31,9 +31,6 @@ namespace slamd {
 
 /// What one pose-graph optimisation changes downstream.
 struct BackendCorrection {
-  /// The keyframe of this correction was culled (mapping forgets its cloud: keyframe_poses lists
-  /// every keyframe the back end holds up to its newest).
-  bool culled = false;
   /// Uncorrected world (filter) -> corrected world, for every pose after this keyframe.
   SE3 T_world_uncorrected = SE3::Identity();
   /// Every keyframe's optimised T_world_camera, for Mapper::rebuild().

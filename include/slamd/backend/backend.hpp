@@ -127,11 +127,12 @@ class Backend {
   std::int64_t segmentRoot(std::int64_t segment) const;
 
  private:
-  /// A culled keyframe: merged into anchor_id, at T_anchor_keyframe (measured) from it.
+  /// A culled keyframe: merged into anchor_id, at T_anchor_keyframe from it (the optimised offset
+  /// when it was culled).
   struct CulledKeyframe {
     std::int64_t anchor_id = -1;
     SE3 T_anchor_keyframe = SE3::Identity();
-    Matrix6d information = Matrix6d::Identity();  ///< of T_anchor_keyframe
+    Matrix6d information = Matrix6d::Identity();  ///< of T_anchor_keyframe (the match's)
   };
   struct KeyframeInfo {
     std::int64_t segment = 0;
