@@ -5,6 +5,7 @@
 #include <chrono>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <sstream>
 
 #include <opencv2/core.hpp>
@@ -144,6 +145,10 @@ struct SlamDaemon::Impl {
     filter_config = FilterConfig::load(config);
     mapping_config = MappingConfig::load(config);
     backend_config = BackendConfig::load(config);
+    // Keyframe clouds are kept for the back end's corrections to move; the map is then made of
+    // keyframes only, since frames between them could not follow a correction.
+    if (!backend_config.enabled) mapping_config.keep_keyframe_clouds = false;
+    if (mapping_config.keep_keyframe_clouds) mapping_config.keyframes_only = true;
     if (daemon.publish_frames) frame_publisher_config = LcmFramePublisherConfig::load(config);
     if (mapping_config.enabled) mapper = std::make_unique<Mapper>(mapping_config);
     if (backend_config.enabled) {
@@ -360,7 +365,10 @@ bool SlamDaemon::Impl::openSource() {
                                                                   : "EKF, no vanishing points")
                                 : "off: odometry chained")
       << "), publish, mapping ("
-      << (mapper ? (mapping_config.keyframes_only ? "keyframes" : "every frame") : "off")
+      << (mapper ? (mapping_config.keep_keyframe_clouds
+                        ? "keyframes, moved by the back end's corrections"
+                        : (mapping_config.keyframes_only ? "keyframes" : "every frame"))
+                 : "off")
       << "), back end ("
       << (backend ? "loop closing, relocalisation, pose graph" : "off: backend.enabled is false")
       << ")";
@@ -794,9 +802,12 @@ void SlamDaemon::Impl::finishBackend() {
     for (const std::int64_t id : backend->backend().graph().nodeIds()) {
       keyframe_poses.emplace_back(id, backend->backend().pose(id));
     }
-    const RebuildResult rebuilt = mapper->rebuild(keyframe_poses);
-    SLAMD_LOG_INFO(kLog) << "final map rebuilt from " << rebuilt.keyframes_integrated
-                         << " keyframe clouds at their optimised poses";
+    mapper->correctKeyframePoses(keyframe_poses);
+    const KeyframeMoveResult moved =
+        mapper->moveCorrectedKeyframes(std::numeric_limits<double>::infinity());
+    SLAMD_LOG_INFO(kLog) << "final map: " << moved.keyframes_moved
+                         << " keyframes moved to their optimised poses in " << moved.seconds
+                         << " s (" << mapper->stats().keyframes_moved << " moves during the run)";
   }
 }
 

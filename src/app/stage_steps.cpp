@@ -243,32 +243,17 @@ void PublishStep::process(EstimatedPacket packet) {
 
 // --- mapping ---------------------------------------------------------------------------------
 
-double largestKeyframeShiftM(const std::unordered_map<std::int64_t, SE3>& before,
-                             const std::vector<std::pair<std::int64_t, SE3>>& after) {
-  constexpr double kLeverArmM = 2.0;
-  double largest_m = 0.0;
-  for (const auto& [id, T_after] : after) {
-    const auto it = before.find(id);
-    if (it == before.end()) continue;
-    const SE3 delta = it->second.inverse() * T_after;
-    const double angle_rad = Eigen::AngleAxisd(delta.linear()).angle();
-    largest_m = std::max(largest_m, delta.translation().norm() + kLeverArmM * angle_rad);
-  }
-  return largest_m;
-}
-
 MappingStep::MappingStep(Mapper& mapper, const MappingConfig& config, DaemonPublisher& publisher,
                          SpscQueue<MapCorrection>* corrections, SpscQueue<MapRequest>* requests)
     : mapper_(mapper),
-      resolution_m_(config.resolution_m),
       keyframes_only_(config.keyframes_only),
+      correction_budget_s_(config.correction_budget_ms * 1e-3),
       publisher_(publisher),
       corrections_(corrections),
       requests_(requests) {}
 
 void MappingStep::reset() {
   mapper_.reset();
-  keyframe_map_poses_.clear();
   T_world_uncorrected_ = SE3::Identity();
 }
 
@@ -281,20 +266,26 @@ void MappingStep::applyCorrections() {
   std::optional<BackendCorrection> newest;
   corrections_.take(resetEpoch(),
                     [&newest](MapCorrection item) { newest = std::move(item.correction); });
-  if (!newest) return;
-  forgetCulledKeyframes(newest->keyframe_poses);
-  T_world_uncorrected_ = newest->T_world_uncorrected;
-  // Re-integrating every keyframe cloud costs about one frame's integration per keyframe: only
-  // worth it when the correction moves the map by more than half a voxel.
-  const double shift_m = largestKeyframeShiftM(keyframe_map_poses_, newest->keyframe_poses);
-  if (shift_m < 0.5 * resolution_m_) return;
-  const RebuildResult rebuilt = mapper_.rebuild(newest->keyframe_poses);
-  for (const auto& [id, T_world_keyframe] : newest->keyframe_poses) {
-    auto it = keyframe_map_poses_.find(id);
-    if (it != keyframe_map_poses_.end()) it->second = T_world_keyframe;
+  if (newest) {
+    forgetCulledKeyframes(newest->keyframe_poses);
+    T_world_uncorrected_ = newest->T_world_uncorrected;
+    const KeyframeCorrectionResult corrected = mapper_.correctKeyframePoses(newest->keyframe_poses);
+    if (corrected.keyframes_to_move > 0) {
+      SLAMD_LOG_DEBUG(kLog) << "correction: " << corrected.keyframes_to_move
+                            << " keyframes to move in the map";
+    }
   }
-  SLAMD_LOG_INFO(kLog) << "map rebuilt from " << rebuilt.keyframes_integrated
-                       << " keyframe clouds after a correction of up to " << shift_m << " m";
+}
+
+void MappingStep::moveCorrectedKeyframes(std::int64_t cycle_start_ns) {
+  // Keyframes a correction moved are moved a few at a time, in what is left of this frame's
+  // budget, so that this stage's time per frame stays bounded however large the map is.
+  const double spent_s = 1e-9 * static_cast<double>(steadyNowNs() - cycle_start_ns);
+  const KeyframeMoveResult moved = mapper_.moveCorrectedKeyframes(correction_budget_s_ - spent_s);
+  if (moved.caught_up) {
+    SLAMD_LOG_DEBUG(kLog) << "map caught up with the corrections ("
+                          << mapper_.stats().keyframes_moved << " keyframe moves so far)";
+  }
 }
 
 void MappingStep::forgetCulledKeyframes(
@@ -308,13 +299,8 @@ void MappingStep::forgetCulledKeyframes(
     newest_id = std::max(newest_id, entry.first);
     listed.insert(entry.first);
   }
-  for (auto it = keyframe_map_poses_.begin(); it != keyframe_map_poses_.end();) {
-    if (it->first < newest_id && listed.count(it->first) == 0) {
-      mapper_.forgetKeyframe(it->first);
-      it = keyframe_map_poses_.erase(it);
-    } else {
-      ++it;
-    }
+  for (const std::int64_t id : mapper_.keptKeyframeIds()) {
+    if (id < newest_id && listed.count(id) == 0) mapper_.forgetKeyframeInSteps(id);
   }
 }
 
@@ -355,6 +341,7 @@ void MappingStep::publishOutputs(const MapperOutputs& outputs) {
 
 void MappingStep::process(const EstimatedPacket& packet) {
   if (!enter(packet.reset_epoch, packet.frame)) return;
+  const std::int64_t cycle_start_ns = steadyNowNs();
   applyCorrections();
   serveRequests();
   if (packet.frame && packet.odometry && packet.pose.tracking_state != TrackingState::kLost &&
@@ -366,15 +353,13 @@ void MappingStep::process(const EstimatedPacket& packet) {
     }
     const SE3 T_world_camera = T_world_uncorrected_ * packet.pose.T_world_camera;
     const IntegrationResult result = mapper_.integrate(*packet.frame, T_world_camera, keyframe_id);
-    if (result.keyframe_cloud_kept && keyframe_id) {
-      keyframe_map_poses_[*keyframe_id] = T_world_camera;
-    }
     if (result.status == IntegrationStatus::kBadFrame ||
         result.status == IntegrationStatus::kBadPose) {
       // The pipeline counts a thrown error against this stage and carries on.
       throw std::runtime_error("frame not mapped: " + result.error);
     }
   }
+  moveCorrectedKeyframes(cycle_start_ns);
   publishOutputs(mapper_.poll(mapper_.latestUtime()));
   leaf_voxels_.store(static_cast<std::int64_t>(mapper_.numLeafNodes()), std::memory_order_relaxed);
   // Counting occupied voxels walks the tree: once a second is plenty for the status channel.

@@ -42,6 +42,42 @@ std::string poseError(const SE3& T) {
   return {};
 }
 
+/// A voxel's log-odds closer to zero than this after a contribution was taken out: nothing else
+/// saw it (sums of hits and misses are otherwise at least about 0.03 from zero).
+constexpr float kEmptyLogOdds = 1e-4f;
+
+/// Deletes the finest voxel at `key` and every ancestor left without children (the voxel is
+/// unknown again). OcTree::deleteNode cannot be used: it deletes an emptied parent whose child
+/// array is still allocated (an assertion, or a leak without assertions). Here such a parent is
+/// expanded and pruned first, which frees the array, through OctoMap's public node API.
+template <typename Tree>
+void deleteVoxel(Tree& tree, const octomap::OcTreeKey& key) {
+  using Node = typename Tree::NodeType;
+  const unsigned depth_max = tree.getTreeDepth();
+  std::vector<Node*> path;      // path[d]: the node at depth d
+  std::vector<unsigned> child;  // child[d]: which child of path[d] leads to the voxel
+  Node* node = tree.getRoot();
+  if (node == nullptr) return;
+  for (unsigned depth = 0; depth < depth_max; ++depth) {
+    const unsigned pos = octomap::computeChildIdx(key, static_cast<int>(depth_max - 1 - depth));
+    if (!tree.nodeChildExists(node, pos)) return;  // not there (a pruned block is not deleted)
+    path.push_back(node);
+    child.push_back(pos);
+    node = tree.getNodeChild(node, pos);
+  }
+  for (std::size_t d = path.size(); d-- > 0;) {
+    tree.deleteNodeChild(path[d], child[d]);
+    if (tree.nodeHasChildren(path[d])) return;
+    if (d == 0) {
+      tree.clear();  // the last voxel of the map
+      return;
+    }
+    // path[d] is now childless but still holds its (empty) child array: free it.
+    tree.expandNode(path[d]);
+    tree.pruneNode(path[d]);
+  }
+}
+
 std::string extensionOf(const std::string& path) {
   return std::filesystem::path(path).extension().string();
 }
@@ -197,8 +233,15 @@ void Mapper::configureTree() {
   withTree([this](auto& tree) {
     tree.setProbHit(config_.prob_hit);
     tree.setProbMiss(config_.prob_miss);
-    tree.setClampingThresMin(config_.clamp_min);
-    tree.setClampingThresMax(config_.clamp_max);
+    if (config_.keep_keyframe_clouds) {
+      // Probabilities 0 and 1 are log-odds of -inf and +inf: no clamping, so that a keyframe's
+      // contribution can be taken out exactly (see the header).
+      tree.setClampingThresMin(0.0);
+      tree.setClampingThresMax(1.0);
+    } else {
+      tree.setClampingThresMin(config_.clamp_min);
+      tree.setClampingThresMax(config_.clamp_max);
+    }
     tree.setOccupancyThres(config_.occupancy_threshold);
     tree.enableChangeDetection(true);
     tree.resetChangeDetection();
@@ -287,6 +330,7 @@ IntegrationResult Mapper::integrate(const RgbdFrame& frame, const SE3& T_world_c
   result.points_filtered = filtered_.size();
   latest_utime_ = std::max(latest_utime_, frame.utime);
 
+  if (keyframe_id) forgetKeyframe(*keyframe_id);  // an id integrated again replaces the old one
   result = insertCameraCloud(filtered_, T_world_camera, std::move(result));
   if (result.status == IntegrationStatus::kOk && keyframe_id) {
     result.keyframe_cloud_kept = keepKeyframe(*keyframe_id, filtered_, T_world_camera, frame.utime);
@@ -314,6 +358,7 @@ IntegrationResult Mapper::integrateCloud(const PointCloud& cloud_camera, const S
   result.depth.valid = static_cast<std::int64_t>(filtered_.size());
   result.points_filtered = filtered_.size();
   latest_utime_ = std::max(latest_utime_, utime);
+  if (keyframe_id) forgetKeyframe(*keyframe_id);
   result = insertCameraCloud(filtered_, T_world_camera, std::move(result));
   if (result.status == IntegrationStatus::kOk && keyframe_id) {
     result.keyframe_cloud_kept = keepKeyframe(*keyframe_id, filtered_, T_world_camera, utime);
@@ -322,7 +367,8 @@ IntegrationResult Mapper::integrateCloud(const PointCloud& cloud_camera, const S
 }
 
 IntegrationResult Mapper::insertCameraCloud(const PointCloud& cloud_camera,
-                                            const SE3& T_world_camera, IntegrationResult result) {
+                                            const SE3& T_world_camera, IntegrationResult result,
+                                            Contribution contribution) {
   const auto t_insert = Clock::now();
   const Eigen::Vector3d t = T_world_camera.translation();
   const octomap::point3d origin(static_cast<float>(t.x()), static_cast<float>(t.y()),
@@ -348,7 +394,7 @@ IntegrationResult Mapper::insertCameraCloud(const PointCloud& cloud_camera,
   std::vector<Eigen::Vector3f>& world = scratch_->points_world;
   world.resize(cloud_camera.size());
   for (std::size_t i = 0; i < cloud_camera.size(); ++i) world[i] = R * cloud_camera.points[i] + t_f;
-  withTree([&](auto& tree) { insertIntoTree(tree, origin, cloud_camera, result); });
+  withTree([&](auto& tree) { insertIntoTree(tree, origin, cloud_camera, contribution, result); });
   inner_dirty_ = true;
   stats_.points_off_map += static_cast<std::int64_t>(result.points_off_map);
   stats_.points_inserted += static_cast<std::int64_t>(cloud_camera.size() - result.points_off_map);
@@ -363,7 +409,8 @@ IntegrationResult Mapper::insertCameraCloud(const PointCloud& cloud_camera,
 
 template <typename Tree>
 void Mapper::insertIntoTree(Tree& tree, const octomap::point3d& origin,
-                            const PointCloud& cloud_camera, IntegrationResult& result) {
+                            const PointCloud& cloud_camera, Contribution contribution,
+                            IntegrationResult& result) {
   const auto start = Clock::now();
   Scratch& s = *scratch_;
   // s.points_world holds cloud_camera moved into the map frame (insertCameraCloud).
@@ -439,11 +486,29 @@ void Mapper::insertIntoTree(Tree& tree, const octomap::point3d& origin,
 
   result.raycast_ms = msSince(start);
   const auto update_start = Clock::now();
+  result.free_voxels = s.free_keys.size();
+  result.occupied_voxels = s.occupied_keys.size();
+  if (contribution == Contribution::kTakeOut) {
+    // The same keys as when the cloud went in at this pose, with the negated updates. A voxel
+    // back at exactly zero was seen by nothing else: it is unknown again.
+    std::vector<octomap::OcTreeKey> emptied;
+    const auto take_out = [&](const octomap::OcTreeKey& key, float log_odds) {
+      const auto* node = tree.updateNode(key, -log_odds, true);
+      if (node != nullptr && std::abs(node->getLogOdds()) < kEmptyLogOdds) emptied.push_back(key);
+    };
+    for (const octomap::OcTreeKey& key : s.free_keys) take_out(key, tree.getProbMissLog());
+    for (const octomap::OcTreeKey& key : s.occupied_keys) take_out(key, tree.getProbHitLog());
+    for (const octomap::OcTreeKey& key : emptied) {
+      const auto* node = tree.search(key);
+      if (node != nullptr && std::abs(node->getLogOdds()) < kEmptyLogOdds) deleteVoxel(tree, key);
+    }
+    voxels_deleted_ = voxels_deleted_ || !emptied.empty();
+    result.update_ms = msSince(update_start);
+    return;
+  }
   // Lazy evaluation: leaves only; inner nodes are refreshed when read (ensureInnerOccupancy).
   for (const octomap::OcTreeKey& key : s.free_keys) tree.updateNode(key, false, true);
   for (const octomap::OcTreeKey& key : s.occupied_keys) tree.updateNode(key, true, true);
-  result.free_voxels = s.free_keys.size();
-  result.occupied_voxels = s.occupied_keys.size();
 
   if constexpr (std::is_same_v<Tree, octomap::ColorOcTree>) {
     if (cloud_camera.hasColor()) {
@@ -476,6 +541,11 @@ bool Mapper::keepKeyframe(std::int64_t id, const PointCloud& cloud, const SE3& T
   kept.cloud_camera.points.assign(cloud.points.begin(), cloud.points.end());
   kept.cloud_camera.colors_bgr.assign(cloud.colors_bgr.begin(), cloud.colors_bgr.end());
   kept.T_world_camera = T_world_camera;
+  kept.T_world_camera_in_map = T_world_camera;
+  kept.farthest_point_m = 0.0;
+  for (const Eigen::Vector3f& p : cloud.points) {
+    kept.farthest_point_m = std::max(kept.farthest_point_m, static_cast<double>(p.norm()));
+  }
   kept.utime = utime;
   stats_.keyframe_cloud_bytes = total + bytesOf(cloud);
   stats_.keyframe_clouds = static_cast<std::int64_t>(keyframes_.size());
@@ -826,14 +896,7 @@ MapFileResult Mapper::loadMap(const std::string& path) {
   }
   tree_ = std::move(plain);
   color_tree_ = std::move(colored);
-  if (tree_) {
-    base_map_ = std::make_unique<octomap::OcTree>(*tree_);
-  } else {
-    base_map_ = std::make_unique<octomap::ColorOcTree>(*color_tree_);
-  }
-  keyframes_.clear();
-  stats_.keyframe_clouds = 0;
-  stats_.keyframe_cloud_bytes = 0;
+  forgetKeyframeClouds();
   inner_dirty_ = false;
   afterMapReplaced();
   result.ok = true;
@@ -843,70 +906,150 @@ MapFileResult Mapper::loadMap(const std::string& path) {
 
 void Mapper::afterMapReplaced() {
   configureTree();
+  requestResynchronisation();
+  frames_since_prune_ = 0;
+}
+
+void Mapper::requestResynchronisation() {
   // Deletions cannot be expressed as updates: skip one sequence number so that subscribers see
   // a gap and resynchronise from the full map requested here.
   ++next_update_sequence_;
   full_map_requested_ = true;
-  frames_since_prune_ = 0;
+  voxels_deleted_ = false;
 }
 
-// --- re-integration
-// --------------------------------------------------------------------------------
+void Mapper::forgetKeyframeClouds() {
+  keyframes_.clear();
+  keyframes_to_move_.clear();
+  stats_.keyframe_clouds = 0;
+  stats_.keyframe_cloud_bytes = 0;
+}
 
-RebuildResult Mapper::rebuild(const std::vector<std::pair<std::int64_t, SE3>>& keyframe_poses) {
-  const auto start = Clock::now();
-  RebuildResult result;
+// --- following corrections ----------------------------------------------------------------------
+
+KeyframeCorrectionResult Mapper::correctKeyframePoses(
+    const std::vector<std::pair<std::int64_t, SE3>>& keyframe_poses) {
+  KeyframeCorrectionResult result;
   for (const auto& [id, pose] : keyframe_poses) {
     const auto it = keyframes_.find(id);
-    if (it == keyframes_.end() || !poseError(pose).empty()) {
+    if (it == keyframes_.end() || it->second.to_forget || !poseError(pose).empty()) {
       ++result.unknown_ids;
       continue;
     }
     it->second.T_world_camera = pose;
   }
-  const double res = resolution();
-  const bool color = hasColor();
-  if (auto* base_color = dynamic_cast<octomap::ColorOcTree*>(base_map_.get())) {
-    tree_.reset();
-    color_tree_ = std::make_unique<octomap::ColorOcTree>(*base_color);
-  } else if (auto* base_plain = dynamic_cast<octomap::OcTree*>(base_map_.get())) {
-    color_tree_.reset();
-    tree_ = std::make_unique<octomap::OcTree>(*base_plain);
-  } else {
-    makeEmptyTree(res, color);
+  // The queue is rebuilt from every kept keyframe: one queued earlier may have been corrected
+  // back to where it is in the map, and each moves once, to its newest pose.
+  keyframes_to_move_.clear();
+  const double half_voxel_m = 0.5 * resolution();
+  for (const auto& [id, keyframe] : keyframes_) {
+    if (keyframe.waiting_to_go_in || keyframe.to_forget) {
+      // Taken out by an earlier move, or to be forgotten: first.
+      keyframes_to_move_.emplace_back(std::numeric_limits<double>::infinity(), id);
+      continue;
+    }
+    if (!keyframe.T_world_camera_in_map) continue;
+    const SE3 delta = keyframe.T_world_camera_in_map->inverse() * keyframe.T_world_camera;
+    const double angle_rad = Eigen::AngleAxisd(delta.linear()).angle();
+    const double largest_shift_m =
+        delta.translation().norm() + keyframe.farthest_point_m * angle_rad;
+    if (largest_shift_m > half_voxel_m) keyframes_to_move_.emplace_back(largest_shift_m, id);
   }
-  configureTree();
-  // Change detection off while re-inserting: the full map replaces every update anyway.
-  withTree([](auto& tree) { tree.enableChangeDetection(false); });
-  const MapperStats saved_stats = stats_;
-  for (const auto& entry : keyframes_) {
-    const IntegrationResult r =
-        insertCameraCloud(entry.second.cloud_camera, entry.second.T_world_camera, {});
-    if (r.status == IntegrationStatus::kOk) ++result.keyframes_integrated;
+  std::sort(keyframes_to_move_.begin(), keyframes_to_move_.end());
+  result.keyframes_to_move = keyframes_to_move_.size();
+  return result;
+}
+
+KeyframeMoveResult Mapper::moveCorrectedKeyframes(double budget_s) {
+  const auto start = Clock::now();
+  KeyframeMoveResult result;
+  // A move is two steps, each about one frame's ray casting: taking the keyframe out, and putting
+  // it in at its corrected pose. The budget is checked between steps.
+  bool stepped = false;
+  while (!keyframes_to_move_.empty() && budget_s > 0.0) {
+    if (stepped && secondsSince(start) >= budget_s) break;
+    const std::int64_t id = keyframes_to_move_.back().second;
+    const auto it = keyframes_.find(id);
+    if (it == keyframes_.end()) {  // forgotten since it was queued
+      keyframes_to_move_.pop_back();
+      continue;
+    }
+    stepped = true;
+    KeyframeCloud& keyframe = it->second;
+    if (keyframe.to_forget) {
+      keyframes_to_move_.pop_back();
+      forgetKeyframe(id);
+      continue;
+    }
+    if (keyframe.T_world_camera_in_map) {
+      takeOut(keyframe);
+      keyframe.waiting_to_go_in = true;
+      continue;
+    }
+    putIn(keyframe);
+    keyframe.waiting_to_go_in = false;
+    keyframes_to_move_.pop_back();
+    ++result.keyframes_moved;
+    ++stats_.keyframes_moved;
   }
-  // Re-insertion is not new data: the per-frame totals stay as they were.
-  stats_ = saved_stats;
-  ++stats_.rebuilds;
-  afterMapReplaced();
+  result.keyframes_left = keyframes_to_move_.size();
+  result.caught_up = stepped && keyframes_to_move_.empty();
+  if (result.caught_up) ++stats_.corrections_caught_up;
+  // Voxels that became unknown (here or in forgetKeyframe()) reach subscribers once the map has
+  // caught up, through one full map.
+  if (keyframes_to_move_.empty() && voxels_deleted_) requestResynchronisation();
   result.seconds = secondsSince(start);
   return result;
+}
+
+void Mapper::takeOut(KeyframeCloud& keyframe) {
+  if (!keyframe.T_world_camera_in_map) return;
+  // Moving a contribution is not new data: the per-frame totals stay as they were.
+  const MapperStats saved_stats = stats_;
+  insertCameraCloud(keyframe.cloud_camera, *keyframe.T_world_camera_in_map, {},
+                    Contribution::kTakeOut);
+  stats_ = saved_stats;
+  keyframe.T_world_camera_in_map.reset();
+}
+
+void Mapper::putIn(KeyframeCloud& keyframe) {
+  const MapperStats saved_stats = stats_;
+  const IntegrationResult r = insertCameraCloud(keyframe.cloud_camera, keyframe.T_world_camera, {});
+  stats_ = saved_stats;
+  if (r.status == IntegrationStatus::kOk) keyframe.T_world_camera_in_map = keyframe.T_world_camera;
+}
+
+void Mapper::forgetKeyframeInSteps(std::int64_t keyframe_id) {
+  const auto it = keyframes_.find(keyframe_id);
+  if (it == keyframes_.end() || it->second.to_forget) return;
+  it->second.to_forget = true;
+  keyframes_to_move_.emplace_back(std::numeric_limits<double>::infinity(), keyframe_id);
 }
 
 void Mapper::forgetKeyframe(std::int64_t keyframe_id) {
   const auto it = keyframes_.find(keyframe_id);
   if (it == keyframes_.end()) return;
+  if (it->second.T_world_camera_in_map) {
+    takeOut(it->second);
+    ++stats_.keyframes_taken_out;
+  }
   stats_.keyframe_cloud_bytes -=
       static_cast<std::int64_t>(it->second.cloud_camera.points.size() * sizeof(Eigen::Vector3f) +
                                 it->second.cloud_camera.colors_bgr.size() * sizeof(ColorBgr));
   keyframes_.erase(it);
   stats_.keyframe_clouds = static_cast<std::int64_t>(keyframes_.size());
+  // A queued entry for it is skipped when popped.
+}
+
+std::vector<std::int64_t> Mapper::keptKeyframeIds() const {
+  std::vector<std::int64_t> ids;
+  ids.reserve(keyframes_.size());
+  for (const auto& entry : keyframes_) ids.push_back(entry.first);
+  return ids;
 }
 
 void Mapper::reset() {
-  keyframes_.clear();
-  stats_.keyframe_clouds = 0;
-  stats_.keyframe_cloud_bytes = 0;
-  base_map_.reset();
+  forgetKeyframeClouds();
   makeEmptyTree(resolution(), hasColor());
   afterMapReplaced();
 }

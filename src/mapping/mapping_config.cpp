@@ -98,10 +98,17 @@ const ConfigSchema<MappingConfig>& MappingConfig::schema() {
           .text("load_path", &C::load_path,
                 "a .bt or .ot map to continue mapping from; empty = start empty")
           .flag("keep_keyframe_clouds", &C::keep_keyframe_clouds,
-                "keep each keyframe's filtered cloud so the map can be rebuilt when keyframe "
-                "poses are corrected")
+                "with the back end on: the map is made of keyframes, whose filtered clouds are "
+                "kept so that corrections move them (log-odds unclamped, so that a keyframe's "
+                "contribution can be taken out exactly); false maps frames where they were first "
+                "put. Off when the back end is off")
           .number("keyframe_cloud_budget_mb", &C::keyframe_cloud_budget_mb, 1, 65536, "MiB",
-                  "memory the kept clouds may use; beyond it new clouds are not kept (counted)");
+                  "memory the kept clouds may use; beyond it new clouds are not kept (counted) "
+                  "and corrections do not move them")
+          .number("correction_budget_ms", &C::correction_budget_ms, 0.0, 10000.0, "ms",
+                  "the mapping stage's time per frame: keyframes a correction moved are moved in "
+                  "what integrating the frame left of it, a step (taking one out, or putting it "
+                  "in) at a time, at least one step when anything is left");
   return table;
 }
 

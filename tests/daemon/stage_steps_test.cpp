@@ -18,6 +18,7 @@
 
 #include "daemon_fixture.hpp"
 #include "slamd/backend/vocabulary.hpp"
+#include "slamd/comms/map_codec.hpp"
 #include "slamd/pipeline/drop_oldest_queue.hpp"
 #include "slamd/pipeline/spsc_queue.hpp"
 #include "slamd/sources/create_frame_source.hpp"
@@ -33,8 +34,9 @@ class RecordingPublisher final : public DaemonPublisher {
   void publishVanishingPoint(Utime, const VanishingPointReport&) override {}
   void publishKeyframes(const KeyframeTrajectory&) override {}
   void publishMapUpdate(const MapUpdate&) override {}
-  void publishFullMap(const FullMap&) override {}
+  void publishFullMap(const FullMap& map) override { full_maps.push_back(map); }
   std::vector<PoseEstimate> poses;
+  std::vector<FullMap> full_maps;
 };
 
 using Trace = std::vector<StepTraceEntry>;
@@ -308,6 +310,99 @@ TEST_F(DaemonStageSteps, OnThreadsEveryStageResetsAtTheSamePointOfTheStream) {
   expectResetAtOnePointOfTheStream(filter_trace, before, after, "filter");
   expectResetAtOnePointOfTheStream(publish_trace, before, after, "publish");
   expectResetAtOnePointOfTheStream(mapping_trace, before, after, "mapping");
+}
+
+/// Voxels of `a` whose occupancy `b` does not share (unknown in b, or the other state).
+std::size_t occupancyDisagreements(const octomap::OcTree& a, const octomap::OcTree& b) {
+  std::size_t disagreements = 0;
+  for (auto it = a.begin_leafs(); it != a.end_leafs(); ++it) {
+    const octomap::OcTreeNode* other = b.search(it.getKey(), static_cast<unsigned>(it.getDepth()));
+    if (other == nullptr || a.isNodeOccupied(*it) != b.isNodeOccupied(other)) ++disagreements;
+  }
+  return disagreements;
+}
+
+// Issue 24 item 3: keyframes mapped at drifted poses, then a back-end correction. The mapping
+// step moves them a step per frame within its budget, never the whole map at once, and once it
+// has caught up the map it publishes is the map of those keyframes at the corrected poses.
+TEST_F(DaemonStageSteps, TheMapFollowsACorrectionAStepPerFrameAndThenMatchesTheCorrectedPoses) {
+  config_.set("mapping.full_map_period_s", "0");
+  config_.set("mapping.update_rate_hz", "0");
+  config_.set("mapping.correction_budget_ms", "0.001");  // one step per frame
+  MappingConfig mapping_config = MappingConfig::load(config_);
+  mapping_config.keyframes_only = true;  // as the daemon sets it when the back end runs
+  Mapper mapper(mapping_config);
+  Mapper reference(mapping_config);
+  RecordingPublisher publisher;
+  SpscQueue<MapCorrection> map_corrections(4);
+  MappingStep mapping(mapper, mapping_config, publisher, &map_corrections, nullptr);
+  const Trajectory truth = *source_->groundTruth();
+
+  BackendCorrection correction;
+  std::vector<RgbdFramePtr> frames;
+  auto packet = [](const RgbdFramePtr& frame, std::optional<std::int64_t> keyframe_id,
+                   const SE3& T_world_camera) {
+    EstimatedPacket p;
+    p.frame = frame;
+    p.odometry.emplace();
+    p.odometry->utime = frame->utime;
+    if (keyframe_id) {
+      auto keyframe = std::make_shared<Keyframe>();
+      keyframe->id = *keyframe_id;
+      p.odometry->is_keyframe = true;
+      p.odometry->keyframe = keyframe;
+    }
+    p.pose.utime = frame->utime;
+    p.pose.T_world_camera = T_world_camera;
+    p.pose.tracking_state = TrackingState::kOk;
+    return p;
+  };
+  for (int i = 0; i < kFrames; ++i) {
+    const FrameRead read = source_->next(std::chrono::milliseconds(1000));
+    ASSERT_EQ(read.status, FrameRead::Status::kFrame);
+    frames.push_back(read.frame);
+    const SE3& T_true = truth.at(static_cast<std::size_t>(i)).T_world_camera;
+    SE3 drifted = T_true;
+    drifted.translation() += static_cast<double>(i) * Eigen::Vector3d(0.02, -0.01, 0.03);
+    drifted.linear() =
+        Eigen::AngleAxisd(0.005 * i, Eigen::Vector3d::UnitY()).toRotationMatrix() * T_true.linear();
+    mapping.process(packet(read.frame, i, drifted));
+    reference.integrate(*read.frame, T_true, i);
+    correction.keyframe_poses.emplace_back(i, T_true);
+  }
+  ASSERT_EQ(mapper.stats().keyframe_clouds, kFrames);
+  EXPECT_GT(occupancyDisagreements(*reference.ocTree(), *mapper.ocTree()), 1000u);
+
+  ASSERT_TRUE(map_corrections.tryPush(MapCorrection{correction, 0}));
+  // Frames that are not keyframes keep coming; each gives the step a little time.
+  int frames_to_catch_up = 0;
+  Utime utime = frames.back()->utime;
+  auto laterFrame = [&] {
+    auto frame = std::make_shared<RgbdFrame>(*frames.back());
+    frame->utime = utime += 33'333;
+    return frame;
+  };
+  do {
+    mapping.process(packet(laterFrame(), std::nullopt, SE3::Identity()));
+    ++frames_to_catch_up;
+  } while (mapper.keyframesToMove() > 0 && frames_to_catch_up < 100);
+  // Keyframe 0 did not drift; each of the others is taken out, then put in: at most a step a
+  // frame with this budget (none in a frame whose budget the correction's bookkeeping used up).
+  EXPECT_GE(frames_to_catch_up, 2 * (kFrames - 1));
+  EXPECT_LT(frames_to_catch_up, 100);
+  EXPECT_EQ(mapper.stats().keyframes_moved, kFrames - 1);
+  EXPECT_EQ(mapper.stats().frames_integrated, kFrames);  // the other frames were not mapped
+
+  // The map published after catching up (a full map: voxels became unknown) is the map of the
+  // keyframes at their corrected poses.
+  mapping.process(packet(laterFrame(), std::nullopt, SE3::Identity()));
+  ASSERT_FALSE(publisher.full_maps.empty());
+  std::string why;
+  const std::unique_ptr<octomap::OcTree> published =
+      fullMapToOcTree(publisher.full_maps.back(), &why);
+  ASSERT_NE(published, nullptr) << why;
+  EXPECT_EQ(occupancyDisagreements(*reference.ocTree(), *published), 0u);
+  EXPECT_EQ(occupancyDisagreements(*published, *reference.ocTree()), 0u);
 }
 
 }  // namespace

@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <limits>
+#include <memory>
 #include <random>
 
 #include <gtest/gtest.h>
@@ -238,40 +239,232 @@ TEST(Mapper, PollEmitsUpdatesAtTheConfiguredRateAndFullMapsOnRequest) {
   EXPECT_FALSE(mapper.fullMapRequested());
 }
 
-TEST(Mapper, RebuildAtCorrectedPosesEqualsMappingAtThosePoses) {
-  const BoxRoom room;
-  const std::vector<SE3> truth = test::lookAroundPoses(4);
-  MappingConfig config = testConfig();
-  Mapper corrected(config);
-  Mapper reference(config);
-  std::vector<std::pair<std::int64_t, SE3>> poses;
+/// Every voxel of `expected` is in `actual` with the same log-odds (to `tolerance`), and `actual`
+/// has no voxel `expected` lacks. Pruned blocks compare by the value they hold.
+void expectSameVoxels(const octomap::OcTree& actual, const octomap::OcTree& expected,
+                      float tolerance = 1e-3f) {
+  std::size_t mismatches = 0;
+  for (auto it = expected.begin_leafs(); it != expected.end_leafs(); ++it) {
+    const octomap::OcTreeNode* other =
+        actual.search(it.getKey(), static_cast<unsigned>(it.getDepth()));
+    if (other == nullptr || std::abs(other->getLogOdds() - it->getLogOdds()) > tolerance) {
+      ++mismatches;
+    }
+  }
+  std::size_t extra = 0;
+  for (auto it = actual.begin_leafs(); it != actual.end_leafs(); ++it) {
+    if (expected.search(it.getKey(), static_cast<unsigned>(it.getDepth())) == nullptr) ++extra;
+  }
+  EXPECT_EQ(mismatches, 0u) << "of " << expected.getNumLeafNodes() << " expected voxels";
+  EXPECT_EQ(extra, 0u) << "voxels left where nothing should be";
+}
+
+/// Keyframes of a look-around at `truth`, integrated at poses that drift by a few centimetres and
+/// a quarter of a degree more with each keyframe (the first does not drift), as odometry drifts
+/// before a loop closes; returns the corrected (true) poses by id.
+std::vector<std::pair<std::int64_t, SE3>> integrateDrifted(Mapper& mapper, const BoxRoom& room,
+                                                           const std::vector<SE3>& truth) {
+  std::vector<std::pair<std::int64_t, SE3>> corrected;
   for (std::size_t i = 0; i < truth.size(); ++i) {
     const RgbdFrame frame = room.render(truth[i]);
     SE3 drifted = truth[i];
-    drifted.translation() += Eigen::Vector3d(0.03 * static_cast<double>(i), 0.0, 0.02);
-    ASSERT_TRUE(
-        corrected.integrate(frame, drifted, static_cast<std::int64_t>(i)).keyframe_cloud_kept);
-    reference.integrate(frame, truth[i]);
-    poses.emplace_back(static_cast<std::int64_t>(i), truth[i]);
+    drifted.translation() += static_cast<double>(i) * Eigen::Vector3d(0.03, 0.0, 0.02);
+    drifted.linear() = Eigen::AngleAxisd(0.004 * static_cast<double>(i), Eigen::Vector3d::UnitY()) *
+                       drifted.linear();
+    const auto id = static_cast<std::int64_t>(i);
+    EXPECT_TRUE(mapper.integrate(frame, drifted, id).keyframe_cloud_kept);
+    corrected.emplace_back(id, truth[i]);
   }
+  return corrected;
+}
+
+/// The map of the frames seen from `truth`, integrated directly at `poses` (default: `truth`).
+std::unique_ptr<Mapper> mapAt(const BoxRoom& room, const std::vector<SE3>& truth,
+                              const MappingConfig& config, std::vector<SE3> poses = {}) {
+  if (poses.empty()) poses = truth;
+  auto reference = std::make_unique<Mapper>(config);
+  for (std::size_t i = 0; i < truth.size(); ++i) {
+    reference->integrate(room.render(truth[i]), poses[i], static_cast<std::int64_t>(i));
+  }
+  return reference;
+}
+
+TEST(Mapper, CorrectedKeyframesMoveAndTheMapEqualsMappingAtTheCorrectedPoses) {
+  const BoxRoom room;
+  const std::vector<SE3> truth = test::lookAroundPoses(4);
+  const MappingConfig config = testConfig();
+  Mapper corrected(config);
+  std::vector<std::pair<std::int64_t, SE3>> poses = integrateDrifted(corrected, room, truth);
   poses.emplace_back(999, SE3::Identity());  // unknown id
   const std::int64_t sequence_before = corrected.nextUpdateSequence();
-  const RebuildResult r = corrected.rebuild(poses);
-  EXPECT_EQ(r.keyframes_integrated, truth.size());
-  EXPECT_EQ(r.unknown_ids, 1u);
+  const KeyframeCorrectionResult queued = corrected.correctKeyframePoses(poses);
+  // Keyframe 0 did not drift in translation or rotation: it stays.
+  EXPECT_EQ(queued.keyframes_to_move, truth.size() - 1);
+  EXPECT_EQ(queued.unknown_ids, 1u);
+  const KeyframeMoveResult moved =
+      corrected.moveCorrectedKeyframes(std::numeric_limits<double>::infinity());
+  EXPECT_EQ(moved.keyframes_moved, truth.size() - 1);
+  EXPECT_EQ(moved.keyframes_left, 0u);
+  EXPECT_TRUE(moved.caught_up);
+  // The drifted surfaces became unknown, which updates cannot say: a full map resynchronises.
   EXPECT_EQ(corrected.nextUpdateSequence(), sequence_before + 1);
   EXPECT_TRUE(corrected.fullMapRequested());
-  const octomap::OcTree& a = *corrected.ocTree();
-  const octomap::OcTree& b = *reference.ocTree();
-  EXPECT_EQ(a.getNumLeafNodes(), b.getNumLeafNodes());
-  for (auto it = b.begin_leafs(); it != b.end_leafs(); ++it) {
-    const octomap::OcTreeNode* other = a.search(it.getKey(), static_cast<unsigned>(it.getDepth()));
-    ASSERT_NE(other, nullptr);
-    ASSERT_FLOAT_EQ(it->getLogOdds(), other->getLogOdds());
+  // Moving is not new data.
+  EXPECT_EQ(corrected.stats().frames_integrated, static_cast<std::int64_t>(truth.size()));
+  EXPECT_EQ(corrected.stats().keyframes_moved, static_cast<std::int64_t>(truth.size()) - 1);
+
+  const std::unique_ptr<Mapper> reference = mapAt(room, truth, config);
+  expectSameVoxels(*corrected.ocTree(), *reference->ocTree());
+  // Nothing left to do: a second identical correction queues nothing.
+  EXPECT_EQ(corrected.correctKeyframePoses(poses).keyframes_to_move, 0u);
+  EXPECT_FALSE(corrected.moveCorrectedKeyframes(1.0).caught_up);
+}
+
+TEST(Mapper, KeyframesMoveWithinTheBudgetFarthestFirstAndFollowNewerCorrections) {
+  const BoxRoom room;
+  const std::vector<SE3> truth = test::lookAroundPoses(8);  // 24 overlapping views
+  const MappingConfig config = testConfig();
+  Mapper corrected(config);
+  const std::vector<std::pair<std::int64_t, SE3>> poses = integrateDrifted(corrected, room, truth);
+  ASSERT_EQ(corrected.correctKeyframePoses(poses).keyframes_to_move, truth.size() - 1);
+  // No budget, no work.
+  EXPECT_EQ(corrected.moveCorrectedKeyframes(0.0).keyframes_moved, 0u);
+  EXPECT_EQ(corrected.keyframesToMove(), truth.size() - 1);
+  // A tiny budget still does one step per call: taking the farthest (the last keyframe) out,
+  // then putting it in.
+  constexpr double kTinyBudgetS = 1e-9;
+  KeyframeMoveResult step = corrected.moveCorrectedKeyframes(kTinyBudgetS);
+  EXPECT_EQ(step.keyframes_moved, 0u);
+  EXPECT_EQ(step.keyframes_left, truth.size() - 1);
+  step = corrected.moveCorrectedKeyframes(kTinyBudgetS);
+  EXPECT_EQ(step.keyframes_moved, 1u);
+  EXPECT_EQ(step.keyframes_left, truth.size() - 2);
+  EXPECT_FALSE(step.caught_up);
+  // Partway, a newer correction moves every keyframe again (0.1 m along x): each one, moved
+  // already or not, moves once more, to its newest pose.
+  for (int i = 0; i < 21; ++i) corrected.moveCorrectedKeyframes(kTinyBudgetS);  // 10.5 moves
+  std::vector<SE3> final_poses = truth;
+  std::vector<std::pair<std::int64_t, SE3>> newer = poses;
+  for (std::size_t i = 0; i < newer.size(); ++i) {
+    final_poses[i].translation().x() += 0.1;
+    newer[i].second = final_poses[i];
   }
-  EXPECT_EQ(corrected.stats().keyframe_clouds, static_cast<std::int64_t>(truth.size()));
-  corrected.forgetKeyframe(0);
-  EXPECT_EQ(corrected.stats().keyframe_clouds, static_cast<std::int64_t>(truth.size()) - 1);
+  const KeyframeCorrectionResult queued = corrected.correctKeyframePoses(newer);
+  EXPECT_EQ(queued.keyframes_to_move, truth.size());
+  std::size_t moves = 0;
+  std::size_t calls = 0;
+  while (corrected.keyframesToMove() > 0 && calls < 1000) {
+    step = corrected.moveCorrectedKeyframes(kTinyBudgetS);
+    moves += step.keyframes_moved;
+    ++calls;
+  }
+  EXPECT_EQ(moves, truth.size());
+  // Two steps per keyframe, less the one taken out before the newer correction came.
+  EXPECT_EQ(calls, 2 * truth.size() - 1);
+  EXPECT_TRUE(step.caught_up);
+  const std::unique_ptr<Mapper> reference = mapAt(room, truth, config, final_poses);
+  expectSameVoxels(*corrected.ocTree(), *reference->ocTree());
+}
+
+TEST(Mapper, ACorrectionUnderHalfAVoxelLeavesTheKeyframeWhereItIs) {
+  const BoxRoom room;
+  const MappingConfig config = testConfig();
+  Mapper mapper(config);
+  const SE3 T = SE3::Identity();
+  ASSERT_TRUE(mapper.integrate(room.render(T), T, 7).keyframe_cloud_kept);
+  SE3 nudged = T;
+  nudged.translation().x() += 0.2 * config.resolution_m;
+  EXPECT_EQ(mapper.correctKeyframePoses({{7, nudged}}).keyframes_to_move, 0u);
+  // A rotation moves far points most: 0.6 degrees at the room's far corners (3.4 m) moves them
+  // by 3.6 cm, over half a 5 cm voxel.
+  SE3 turned = T;
+  turned.linear() = Eigen::AngleAxisd(0.6 * M_PI / 180.0, Eigen::Vector3d::UnitY()).matrix();
+  EXPECT_EQ(mapper.correctKeyframePoses({{7, turned}}).keyframes_to_move, 1u);
+  // Small corrections add up: the distance counts from where the keyframe is in the map.
+  SE3 twice = T;
+  twice.translation().x() += 0.6 * config.resolution_m;
+  EXPECT_EQ(mapper.correctKeyframePoses({{7, twice}}).keyframes_to_move, 1u);
+  // Bad poses are refused.
+  SE3 bad = T;
+  bad.translation().x() = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_EQ(mapper.correctKeyframePoses({{7, bad}}).unknown_ids, 1u);
+}
+
+TEST(Mapper, AForgottenKeyframeLeavesTheMapAsIfItHadNeverBeenThere) {
+  const BoxRoom room;
+  const MappingConfig config = testConfig();
+  const std::vector<SE3> views = test::lookAroundPoses(4);
+  Mapper mapper(config);
+  Mapper without(config);
+  for (std::size_t i = 0; i < views.size(); ++i) {
+    const RgbdFrame frame = room.render(views[i]);
+    mapper.integrate(frame, views[i], static_cast<std::int64_t>(i));
+    if (i != 4) without.integrate(frame, views[i], static_cast<std::int64_t>(i));
+  }
+  mapper.forgetKeyframe(4);
+  EXPECT_EQ(mapper.stats().keyframe_clouds, static_cast<std::int64_t>(views.size()) - 1);
+  EXPECT_EQ(mapper.stats().keyframes_taken_out, 1);
+  expectSameVoxels(*mapper.ocTree(), *without.ocTree());
+  // Taking every keyframe out leaves an empty map.
+  for (const std::int64_t id : mapper.keptKeyframeIds()) mapper.forgetKeyframe(id);
+  EXPECT_EQ(mapper.numLeafNodes(), 0u);
+  EXPECT_TRUE(mapper.keptKeyframeIds().empty());
+  // Integrating an id again replaces its contribution instead of adding a second one.
+  Mapper twice(config);
+  Mapper once(config);
+  twice.integrate(room.render(views[1]), views[0], 3);
+  twice.integrate(room.render(views[0]), views[0], 3);
+  once.integrate(room.render(views[0]), views[0], 3);
+  expectSameVoxels(*twice.ocTree(), *once.ocTree());
+}
+
+TEST(Mapper, KeyframesForgottenInStepsGoFirstAndLeaveNothingBehind) {
+  const BoxRoom room;
+  const MappingConfig config = testConfig();
+  const std::vector<SE3> truth = test::lookAroundPoses(4);
+  Mapper mapper(config);
+  std::vector<std::pair<std::int64_t, SE3>> poses = integrateDrifted(mapper, room, truth);
+  mapper.correctKeyframePoses(poses);
+  const std::size_t to_move = mapper.keyframesToMove();
+  mapper.forgetKeyframeInSteps(5);
+  mapper.forgetKeyframeInSteps(5);  // once is enough
+  EXPECT_EQ(mapper.keyframesToMove(), to_move + 1);
+  // The first step forgets it; a later correction no longer moves it.
+  const std::int64_t sequence_before = mapper.nextUpdateSequence();
+  EXPECT_EQ(mapper.moveCorrectedKeyframes(1e-9).keyframes_moved, 0u);
+  EXPECT_EQ(mapper.stats().keyframes_taken_out, 1);
+  EXPECT_EQ(mapper.correctKeyframePoses(poses).unknown_ids, 1u);
+  mapper.moveCorrectedKeyframes(std::numeric_limits<double>::infinity());
+  EXPECT_EQ(mapper.nextUpdateSequence(), sequence_before + 1);
+  Mapper reference(config);
+  for (std::size_t i = 0; i < truth.size(); ++i) {
+    if (i != 5) reference.integrate(room.render(truth[i]), truth[i], static_cast<std::int64_t>(i));
+  }
+  expectSameVoxels(*mapper.ocTree(), *reference.ocTree());
+}
+
+TEST(Mapper, WithoutKeptKeyframeCloudsTheLogOddsAreClamped) {
+  MappingConfig config = testConfig();
+  config.keep_keyframe_clouds = false;
+  Mapper mapper(config);
+  const BoxRoom room;
+  const RgbdFrame frame = room.render(SE3::Identity());
+  for (int i = 0; i < 20; ++i) mapper.integrate(frame, SE3::Identity(), i);
+  EXPECT_EQ(mapper.stats().keyframe_clouds, 0);
+  const octomap::OcTree& tree = *mapper.ocTree();
+  float largest = 0.0f;
+  for (auto it = tree.begin_leafs(); it != tree.end_leafs(); ++it) {
+    largest = std::max(largest, std::abs(it->getLogOdds()));
+  }
+  EXPECT_LE(largest, octomap::logodds(config.clamp_max) + 1e-4f);
+  Mapper unclamped(testConfig());
+  for (int i = 0; i < 20; ++i) unclamped.integrate(frame, SE3::Identity(), 100 + i);
+  float unclamped_largest = 0.0f;
+  const octomap::OcTree& other = *unclamped.ocTree();
+  for (auto it = other.begin_leafs(); it != other.end_leafs(); ++it) {
+    unclamped_largest = std::max(unclamped_largest, std::abs(it->getLogOdds()));
+  }
+  EXPECT_GT(unclamped_largest, 20 * 0.8f);  // 20 hits of logodds(0.7) = 0.85
 }
 
 TEST(Mapper, KeyframeCloudsRespectTheMemoryBudget) {

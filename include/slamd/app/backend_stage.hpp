@@ -4,7 +4,7 @@
 // the graph lives in the frame the filter integrates in (the "uncorrected world"). Each
 // optimisation becomes a BackendCorrection: the transform from the uncorrected world to the
 // corrected one (the publisher applies it to every later pose, like ROS's map -> odom), the
-// corrected keyframe poses (the mapper rebuilds the map from its keyframe clouds) and the
+// corrected keyframe poses (the mapper moves the keyframe clouds that moved) and the
 // optimised keyframe trajectory (published on SLAMD_KEYFRAMES).
 //
 // Every tracked frame is remembered as (keyframe, pose relative to it), so that at the end the
@@ -33,7 +33,7 @@ namespace slamd {
 struct BackendCorrection {
   /// Uncorrected world (filter) -> corrected world, for every pose after this keyframe.
   SE3 T_world_uncorrected = SE3::Identity();
-  /// Every keyframe's optimised T_world_camera, for Mapper::rebuild().
+  /// Every keyframe's optimised T_world_camera, for Mapper::correctKeyframePoses().
   std::vector<std::pair<std::int64_t, SE3>> keyframe_poses;
   /// The message for SLAMD_KEYFRAMES.
   KeyframeTrajectory trajectory;

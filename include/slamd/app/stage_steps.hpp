@@ -332,8 +332,9 @@ struct MappingStepStats {
   std::int64_t occupied_voxels = 0;  ///< counted once a second
 };
 
-/// Integrates each tracked frame (or keyframe) into the map at its corrected pose, rebuilds the
-/// map when the back end moves keyframes, serves SAVE_MAP / PUBLISH_MAP and publishes the map.
+/// Integrates each tracked frame (or keyframe) into the map at its corrected pose, moves the
+/// keyframes the back end's corrections move (within mapping.correction_budget_ms per frame),
+/// serves SAVE_MAP / PUBLISH_MAP and publishes the map.
 class MappingStep : public StepBase {
  public:
   MappingStep(Mapper& mapper, const MappingConfig& config, DaemonPublisher& publisher,
@@ -348,30 +349,24 @@ class MappingStep : public StepBase {
 
  private:
   void applyCorrections();
+  void moveCorrectedKeyframes(std::int64_t cycle_start_ns);
   /// Forgets the kept clouds of keyframes a correction no longer lists (culled by the back end).
   void forgetCulledKeyframes(const std::vector<std::pair<std::int64_t, SE3>>& keyframe_poses);
   void publishOutputs(const MapperOutputs& outputs);
 
   Mapper& mapper_;
-  double resolution_m_;
   bool keyframes_only_;
+  double correction_budget_s_;  ///< per frame, for moving keyframes a correction moved
   DaemonPublisher& publisher_;
   EpochInbox<MapCorrection> corrections_;
   SpscQueue<MapRequest>* requests_;
   std::int64_t next_occupancy_count_ns_ = 0;
   /// The back end's correction: uncorrected (filter) world -> corrected world.
   SE3 T_world_uncorrected_ = SE3::Identity();
-  /// Pose each kept keyframe cloud is in the map at (corrected world).
-  std::unordered_map<std::int64_t, SE3> keyframe_map_poses_;
   bool snapshot_failing_ = false;  ///< the last periodic snapshot failed
   std::atomic<std::int64_t> leaf_voxels_{0};
   std::atomic<std::int64_t> occupied_voxels_{0};
 };
-
-/// Largest distance a keyframe moves between two sets of poses: translation plus the rotation
-/// angle times a 2 m lever arm (a point 2 m in front of the camera), metres.
-double largestKeyframeShiftM(const std::unordered_map<std::int64_t, SE3>& before,
-                             const std::vector<std::pair<std::int64_t, SE3>>& after);
 
 // --- back end --------------------------------------------------------------------------------
 

@@ -8,8 +8,8 @@
 //   on each OdometryResult r with r.keyframe:
 //     BackendUpdate u = backend.addKeyframe(r.keyframe);
 //     if (u.optimized) {
-//       // corrected keyframe poses for the map rebuild; correction for the live pose:
-//       mapper.rebuild(u.corrected_poses);   // re-integrates the kept keyframe clouds
+//       // corrected keyframe poses for the map; correction for the live pose:
+//       mapper.correctKeyframePoses(u.corrected_poses);  // moves the keyframes that moved
 //       T_world_camera_corrected = u.T_world_odometry * T_world_camera_odometry;
 //     }
 //

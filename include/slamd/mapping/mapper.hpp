@@ -11,7 +11,8 @@
 //     if (out.update) publish(toMapUpdateMessage(*out.update));    // slamd/comms/map_codec.hpp
 //     if (out.full_map) publish(toFullMapMessage(*out.full_map));
 //   on PUBLISH_MAP: mapper.requestFullMap();  on SAVE_MAP / shutdown: mapper.saveMaps(prefix);
-//   on corrected keyframe poses from the back end: mapper.rebuild(poses);
+//   on corrected keyframe poses from the back end: mapper.correctKeyframePoses(poses);
+//   on every mapping cycle: mapper.moveCorrectedKeyframes(budget_s);  // bounded time per call
 //
 // Per frame: depth (CV_32FC1 metres, NaN = none) -> camera-frame cloud without NaN, inf, zero,
 // negative or out-of-range depths -> voxel-grid filter (camera frame) -> transform by
@@ -20,6 +21,15 @@
 // rays longer than max_range_m clear free space up to max_range_m only. Bad input (wrong image
 // type or size, invalid intrinsics, non-finite or non-rigid poses, points outside the map's
 // extent) never reaches OctoMap: it is rejected and counted in stats().
+//
+// Keyframes that follow corrections (config.keep_keyframe_clouds): a keyframe's filtered cloud is
+// kept, and its contribution to the map (the log-odds of every voxel its rays crossed or ended
+// in) can be taken out exactly by adding the negated updates at the pose it went in at. A
+// correction therefore moves only the keyframes it moves, within a time budget per call, and the
+// map never re-integrates its history. For the subtraction to be exact the log-odds are not
+// clamped in this mode (clamp_min and clamp_max are not applied): the map's value in a voxel is
+// the sum of the contributions of the keyframes that saw it, and culled keyframes are taken out.
+// A voxel whose contributions are all taken out is deleted (unknown again).
 //
 // Frames: T_world_camera maps camera optical-frame points (x right, y down, z forward, metres)
 // into the map frame (config.frame_id). Every coordinate the Mapper returns is in the map frame.
@@ -91,7 +101,9 @@ struct MapperStats {
   std::int64_t keyframe_clouds = 0;   ///< currently kept
   std::int64_t keyframe_clouds_refused = 0;  ///< not kept because of the memory budget
   std::int64_t keyframe_cloud_bytes = 0;
-  std::int64_t rebuilds = 0;
+  std::int64_t keyframes_moved = 0;        ///< contributions moved to corrected poses
+  std::int64_t keyframes_taken_out = 0;    ///< contributions removed (forgotten keyframes)
+  std::int64_t corrections_caught_up = 0;  ///< times every queued keyframe had been moved
 };
 
 /// Result of a save or load.
@@ -109,10 +121,17 @@ struct MapperOutputs {
   std::optional<MapFileResult> snapshot;
 };
 
-/// Result of rebuild().
-struct RebuildResult {
-  std::size_t keyframes_integrated = 0;
-  std::size_t unknown_ids = 0;  ///< ids in the request without a kept cloud
+/// Result of correctKeyframePoses().
+struct KeyframeCorrectionResult {
+  std::size_t keyframes_to_move = 0;  ///< queued: some point would move by over half a voxel
+  std::size_t unknown_ids = 0;        ///< ids in the request without a kept cloud, or bad poses
+};
+
+/// Result of moveCorrectedKeyframes().
+struct KeyframeMoveResult {
+  std::size_t keyframes_moved = 0;
+  std::size_t keyframes_left = 0;  ///< still queued (the budget ran out)
+  bool caught_up = false;          ///< this call moved the last queued keyframe
   double seconds = 0.0;
 };
 
@@ -127,7 +146,8 @@ class Mapper {
 
   /// Integrates one frame. @param T_world_camera pose of the camera optical frame in the map
   /// frame (metres). @param keyframe_id when set (and keep_keyframe_clouds), the filtered
-  /// camera-frame cloud is kept under this id for rebuild(); an existing id is replaced.
+  /// camera-frame cloud is kept under this id so that corrections can move it; an existing id is
+  /// replaced (its earlier contribution taken out first).
   IntegrationResult integrate(const RgbdFrame& frame, const SE3& T_world_camera,
                               std::optional<std::int64_t> keyframe_id = std::nullopt);
 
@@ -172,19 +192,34 @@ class Mapper {
   /// Writes the snapshot now (config.snapshot_path); fails when no path is configured.
   MapFileResult saveSnapshot();
   /// Replaces the map by a saved .bt or .ot and continues mapping on it. The file's resolution
-  /// and tree type (OcTree or ColorOcTree) are adopted; the loaded map becomes the base that
-  /// rebuild() starts from. Subscribers resynchronise from the next full map.
+  /// and tree type (OcTree or ColorOcTree) are adopted; kept keyframe clouds are forgotten.
+  /// Subscribers resynchronise from the next full map.
   MapFileResult loadMap(const std::string& path);
 
-  // --- re-integration -------------------------------------------------------------------------
-  /// Rebuilds the map from the base (empty, or the loaded map) and every kept keyframe cloud:
-  /// listed keyframes at their corrected poses (T_world_camera, map frame), the others at their
-  /// last known poses, in id order. Frames integrated without a keyframe id are not part of the
-  /// rebuilt map. Subscribers resynchronise from the full map the next poll() emits.
-  RebuildResult rebuild(const std::vector<std::pair<std::int64_t, SE3>>& keyframe_poses);
-  /// Forgets a keyframe's cloud (a keyframe culled by the back end).
+  // --- following corrections -----------------------------------------------------------------
+  /// Sets the corrected pose (T_world_camera, map frame) of kept keyframes. A keyframe whose
+  /// cloud would move by more than half a voxel (translation plus rotation angle times its
+  /// farthest point's distance) is queued for moveCorrectedKeyframes(); the others stay where they
+  /// are. Corrections may come faster than the queue empties: each keyframe moves once, to its
+  /// newest pose.
+  KeyframeCorrectionResult correctKeyframePoses(
+      const std::vector<std::pair<std::int64_t, SE3>>& keyframe_poses);
+  /// Moves queued keyframes, farthest move first, in steps of about one frame's ray casting: a
+  /// keyframe's contribution is taken out at the pose it went in at, then put in at its corrected
+  /// pose. With budget_s > 0, does at least one step and starts none once budget_s has been
+  /// spent; with budget_s <= 0, nothing. Once nothing is left to move, if voxels became unknown
+  /// (which updates cannot say), subscribers resynchronise from the full map the next poll()
+  /// emits.
+  KeyframeMoveResult moveCorrectedKeyframes(double budget_s);
+  std::size_t keyframesToMove() const { return keyframes_to_move_.size(); }
+  /// Forgets a keyframe (culled by the back end): its contribution is taken out of the map and
+  /// its cloud dropped.
   void forgetKeyframe(std::int64_t keyframe_id);
-  /// Empties the map (the RESET command) and forgets every keyframe cloud and the base map.
+  /// forgetKeyframe() as a step of moveCorrectedKeyframes(), done before any move.
+  void forgetKeyframeInSteps(std::int64_t keyframe_id);
+  /// Ids of the kept keyframe clouds (forgotten in steps or not yet), in increasing order.
+  std::vector<std::int64_t> keptKeyframeIds() const;
+  /// Empties the map (the RESET command) and forgets every keyframe cloud.
   void reset();
 
   // --- access ---------------------------------------------------------------------------------
@@ -208,21 +243,35 @@ class Mapper {
  private:
   struct KeyframeCloud {
     PointCloud cloud_camera;
-    SE3 T_world_camera = SE3::Identity();
+    SE3 T_world_camera = SE3::Identity();  ///< newest pose (corrected)
+    /// The pose its contribution is in the map at; none when it could not be put in.
+    std::optional<SE3> T_world_camera_in_map;
+    bool waiting_to_go_in = false;  ///< taken out by a move that has not put it in yet
+    bool to_forget = false;         ///< forgetKeyframeInSteps() was called
+    double farthest_point_m = 0.0;  ///< lever arm for rotations
     Utime utime = 0;
   };
+  enum class Contribution { kPutIn, kTakeOut };
   struct Scratch;
 
   IntegrationResult insertCameraCloud(const PointCloud& cloud_camera, const SE3& T_world_camera,
-                                      IntegrationResult result);
+                                      IntegrationResult result,
+                                      Contribution contribution = Contribution::kPutIn);
   template <typename Tree>
   void insertIntoTree(Tree& tree, const octomap::point3d& origin, const PointCloud& cloud_camera,
-                      IntegrationResult& result);
+                      Contribution contribution, IntegrationResult& result);
+  /// Takes a kept keyframe's contribution out of the map (map statistics unchanged).
+  void takeOut(KeyframeCloud& keyframe);
+  /// Puts a kept keyframe's contribution in at its newest pose (map statistics unchanged).
+  void putIn(KeyframeCloud& keyframe);
   bool rejectBadPose(const SE3& T_world_camera, IntegrationResult& result);
   void makeEmptyTree(double resolution_m, bool color);
   void configureTree();
   void ensureInnerOccupancy();
   void afterMapReplaced();
+  /// Skips an update sequence number and requests a full map (subscribers resynchronise).
+  void requestResynchronisation();
+  void forgetKeyframeClouds();
   bool keepKeyframe(std::int64_t id, const PointCloud& cloud, const SE3& T_world_camera,
                     Utime utime);
   template <typename Function>
@@ -233,12 +282,14 @@ class Mapper {
   MappingConfig config_;
   std::unique_ptr<octomap::OcTree> tree_;
   std::unique_ptr<octomap::ColorOcTree> color_tree_;
-  std::unique_ptr<octomap::AbstractOcTree> base_map_;  ///< loaded map rebuild() starts from
   std::unique_ptr<Scratch> scratch_;
   VoxelGridFilter voxel_filter_;
   PointCloud cloud_;
   PointCloud filtered_;
   std::map<std::int64_t, KeyframeCloud> keyframes_;
+  /// Keyframes to move, ordered by how far they move (farthest last, popped first).
+  std::vector<std::pair<double, std::int64_t>> keyframes_to_move_;
+  bool voxels_deleted_ = false;  ///< since the last full map request
   MapperStats stats_;
   bool inner_dirty_ = false;
   int frames_since_prune_ = 0;

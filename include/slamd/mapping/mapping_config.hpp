@@ -67,6 +67,7 @@ struct MappingConfig {
   // --- re-integration (back end) -------------------------------------------------------------
   bool keep_keyframe_clouds = true;
   int keyframe_cloud_budget_mb = 1024;
+  double correction_budget_ms = 20.0;
 
   /// The `mapping.*` keys.
   static const ConfigSchema<MappingConfig>& schema();
