@@ -604,7 +604,9 @@ void SlamDaemon::Impl::logSummary(const std::vector<StageStats>& stats,
                                  : std::string())
                          << ", " << dropped << " dropped at its input, " << stage.errors
                          << " errors; time per item p50 " << stage.latency.p50_ms << " ms, p95 "
-                         << stage.latency.p95_ms << " ms, p99 " << stage.latency.p99_ms << " ms";
+                         << stage.latency.p95_ms << " ms, p99 " << stage.latency.p99_ms
+                         << " ms (CPU p50 " << stage.cpu.p50_ms << " ms, p99 " << stage.cpu.p99_ms
+                         << " ms)";
   }
   SLAMD_LOG_INFO(kLog) << "frames: " << summary.frames_captured << " captured, "
                        << summary.frames_tracked << " tracked, " << summary.poses_published
@@ -758,6 +760,8 @@ bool SlamDaemon::Impl::writeMetrics(const std::vector<StageStats>& stats) {
     json.key("p50_ms").value(stage.latency.p50_ms);
     json.key("p95_ms").value(stage.latency.p95_ms);
     json.key("p99_ms").value(stage.latency.p99_ms);
+    json.key("cpu_p50_ms").value(stage.cpu.p50_ms);
+    json.key("cpu_p99_ms").value(stage.cpu.p99_ms);
     json.endObject();
   }
   json.endObject();

@@ -361,20 +361,12 @@ void MappingStep::process(const EstimatedPacket& packet) {
   }
   moveCorrectedKeyframes(cycle_start_ns);
   publishOutputs(mapper_.poll(mapper_.latestUtime()));
-  leaf_voxels_.store(static_cast<std::int64_t>(mapper_.numLeafNodes()), std::memory_order_relaxed);
-  // Counting occupied voxels walks the tree: once a second is plenty for the status channel.
-  if (steadyNowNs() >= next_occupancy_count_ns_) {
-    auto count_occupied = [](const auto* tree) {
-      std::int64_t occupied = 0;
-      for (auto it = tree->begin_leafs(); it != tree->end_leafs(); ++it) {
-        if (tree->isNodeOccupied(*it)) ++occupied;
-      }
-      return occupied;
-    };
-    occupied_voxels_.store(mapper_.hasColor() ? count_occupied(mapper_.colorOcTree())
-                                              : count_occupied(mapper_.ocTree()),
-                           std::memory_order_relaxed);
-    next_occupancy_count_ns_ = steadyNowNs() + 1'000'000'000;
+  // Counting voxels walks the whole tree: once a second is plenty for the status channel.
+  if (steadyNowNs() >= next_voxel_count_ns_) {
+    const VoxelCounts counts = mapper_.countVoxels();
+    leaf_voxels_.store(static_cast<std::int64_t>(counts.leaves), std::memory_order_relaxed);
+    occupied_voxels_.store(static_cast<std::int64_t>(counts.occupied), std::memory_order_relaxed);
+    next_voxel_count_ns_ = steadyNowNs() + 1'000'000'000;
   }
 }
 

@@ -274,6 +274,17 @@ std::size_t Mapper::numLeafNodes() const {
   return withTree([](const auto& tree) { return tree.getNumLeafNodes(); });
 }
 
+VoxelCounts Mapper::countVoxels() const {
+  return withTree([](const auto& tree) {
+    VoxelCounts counts;
+    for (auto it = tree.begin_leafs(); it != tree.end_leafs(); ++it) {
+      ++counts.leaves;
+      if (tree.isNodeOccupied(*it)) ++counts.occupied;
+    }
+    return counts;
+  });
+}
+
 std::size_t Mapper::memoryBytes() const {
   return withTree([](const auto& tree) { return tree.memoryUsage(); });
 }

@@ -360,7 +360,7 @@ class MappingStep : public StepBase {
   DaemonPublisher& publisher_;
   EpochInbox<MapCorrection> corrections_;
   SpscQueue<MapRequest>* requests_;
-  std::int64_t next_occupancy_count_ns_ = 0;
+  std::int64_t next_voxel_count_ns_ = 0;
   /// The back end's correction: uncorrected (filter) world -> corrected world.
   SE3 T_world_uncorrected_ = SE3::Identity();
   bool snapshot_failing_ = false;  ///< the last periodic snapshot failed

@@ -37,6 +37,13 @@ inline std::int64_t steadyNowNs() {
       .count();
 }
 
+/// CPU time consumed by the calling thread, nanoseconds.
+inline std::int64_t threadCpuNowNs() {
+  timespec ts{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
+}
+
 /// CPU time consumed by the calling thread, milliseconds: what work costs on one core, unaffected
 /// by other processes competing for the CPU (benchmarks report it next to wall time).
 inline double threadCpuMs() {

@@ -121,6 +121,12 @@ struct MapperOutputs {
   std::optional<MapFileResult> snapshot;
 };
 
+/// Leaves of the OcTree (a pruned block counts once) and how many of them are occupied.
+struct VoxelCounts {
+  std::size_t leaves = 0;
+  std::size_t occupied = 0;
+};
+
 /// Result of correctKeyframePoses().
 struct KeyframeCorrectionResult {
   std::size_t keyframes_to_move = 0;  ///< queued: some point would move by over half a voxel
@@ -231,8 +237,10 @@ class Mapper {
   /// are brought up to date first. Read only; the mapping thread owns them.
   const octomap::OcTree* ocTree();
   const octomap::ColorOcTree* colorOcTree();
-  /// Finest voxel counts of the current map, and the OcTree's memory use in bytes.
+  /// Finest voxel counts of the current map, and the OcTree's memory use in bytes. Each walks
+  /// the whole tree.
   std::size_t numLeafNodes() const;
+  VoxelCounts countVoxels() const;
   std::size_t memoryBytes() const;
   /// Occupancy at a point (map frame, metres): -1 unknown, 0 free, 1 occupied.
   int occupancyAt(const Eigen::Vector3d& point_m) const;

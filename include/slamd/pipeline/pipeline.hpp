@@ -114,6 +114,9 @@ struct StageStats {
   std::uint64_t errors = 0;      ///< process() calls that threw (item dropped, pipeline continues)
   std::vector<std::uint64_t> latency_buckets;  ///< LatencyHistogram::snapshot() of process()
   LatencySummary latency;
+  /// The node thread's CPU time per item: what an item costs, without the time spent waiting
+  /// for a core (on a loaded machine, and for a niced stage, far below the wall time).
+  LatencySummary cpu;
   std::vector<EdgeStats> inputs;  ///< empty for sources
   bool finished = false;
 };
@@ -342,6 +345,7 @@ class NodeBase {
     s.errors = errors_.load(std::memory_order_relaxed);
     s.latency_buckets = latency_.snapshot();
     s.latency = latency_.summary();
+    s.cpu = cpu_.summary();
     s.finished = finished();
     return s;
   }
@@ -351,14 +355,20 @@ class NodeBase {
   RunControl* control_;
   int nice_ = 0;
   std::atomic<bool> finished_{false};
-  /// Counts one item handled in `elapsed_ns`: timed and counted as processed unless it was a
+  /// When an item's handling started, by the wall clock and the thread's CPU clock.
+  struct ItemStart {
+    std::int64_t wall_ns = steadyNowNs();
+    std::int64_t cpu_ns = threadCpuNowNs();
+  };
+  /// Counts one item handled since `start`: timed and counted as processed unless it was a
   /// heartbeat.
-  void countItem(bool heartbeat, std::int64_t elapsed_ns) {
+  void countItem(bool heartbeat, const ItemStart& start) {
     if (heartbeat) {
       heartbeats_.fetch_add(1, std::memory_order_relaxed);
       return;
     }
-    latency_.recordNs(elapsed_ns);
+    latency_.recordNs(steadyNowNs() - start.wall_ns);
+    cpu_.recordNs(threadCpuNowNs() - start.cpu_ns);
     processed_.fetch_add(1, std::memory_order_relaxed);
   }
 
@@ -367,6 +377,7 @@ class NodeBase {
   std::atomic<std::uint64_t> emitted_{0};
   std::atomic<std::uint64_t> errors_{0};
   LatencyHistogram latency_;
+  LatencyHistogram cpu_;
 };
 
 /// The producing end of a node: fans each output item out to every connected edge.
@@ -454,7 +465,7 @@ class SourceNode final : public NodeBase {
   // Returns false at end of stream.
   bool stepOnce(bool sequential) {
     SourceStep<T> step;
-    const std::int64_t start_ns = steadyNowNs();
+    const ItemStart start;
     try {
       step = fn_();
     } catch (const std::exception& e) {
@@ -463,7 +474,7 @@ class SourceNode final : public NodeBase {
     }
     if (step.kind == SourceStep<T>::Kind::kEnd) return false;
     if (step.kind == SourceStep<T>::Kind::kItem && step.item) {
-      countItem(isHeartbeatItem(*step.item), steadyNowNs() - start_ns);
+      countItem(isHeartbeatItem(*step.item), start);
       if (output_.emit(std::move(*step.item), sequential) > 0) {
         emitted_.fetch_add(1, std::memory_order_relaxed);
       }
@@ -521,14 +532,14 @@ class StageNode final : public NodeBase {
  private:
   void processOne(In item, bool sequential) {
     const bool heartbeat = isHeartbeatItem(item);
-    const std::int64_t start_ns = steadyNowNs();
+    const ItemStart start;
     try {
       if constexpr (std::is_void_v<Out>) {
         fn_(std::move(item));
-        countItem(heartbeat, steadyNowNs() - start_ns);
+        countItem(heartbeat, start);
       } else {
         std::optional<Out> result = fn_(std::move(item));
-        countItem(heartbeat, steadyNowNs() - start_ns);
+        countItem(heartbeat, start);
         if (result && output_.emit(std::move(*result), sequential) > 0) {
           emitted_.fetch_add(1, std::memory_order_relaxed);
         }
