@@ -798,7 +798,8 @@ void SlamDaemon::Impl::finishBackend() {
   // The written trajectory and map take the final optimised poses, including corrections that
   // arrived after the publish and mapping threads had finished.
   trajectory = backend->optimizedTrajectory();
-  if (mapper && stats.optimizations > 0) {
+  if (!mapper) return;
+  if (stats.optimizations > 0) {
     for (const std::int64_t id : backend->backend().culledKeyframeIds()) {
       mapper->forgetKeyframe(id);
     }
@@ -807,11 +808,14 @@ void SlamDaemon::Impl::finishBackend() {
       keyframe_poses.emplace_back(id, backend->backend().pose(id));
     }
     mapper->correctKeyframePoses(keyframe_poses);
-    const KeyframeMoveResult moved =
-        mapper->moveCorrectedKeyframes(std::numeric_limits<double>::infinity());
-    SLAMD_LOG_INFO(kLog) << "final map: " << moved.keyframes_moved
-                         << " keyframes moved to their optimised poses in " << moved.seconds
-                         << " s (" << mapper->stats().keyframes_moved << " moves during the run)";
+  }
+  {
+    // Keyframes still queued (new ones, or moves the mapping thread had no time for) go in now.
+    const CatchUpResult caught_up = mapper->catchUp(std::numeric_limits<double>::infinity());
+    SLAMD_LOG_INFO(kLog) << "final map: " << caught_up.keyframes_added << " keyframes put in and "
+                         << caught_up.keyframes_moved << " moved to their optimised poses in "
+                         << caught_up.seconds << " s (" << mapper->stats().keyframes_moved
+                         << " moves during the run)";
   }
 }
 

@@ -247,7 +247,7 @@ MappingStep::MappingStep(Mapper& mapper, const MappingConfig& config, DaemonPubl
                          SpscQueue<MapCorrection>* corrections, SpscQueue<MapRequest>* requests)
     : mapper_(mapper),
       keyframes_only_(config.keyframes_only),
-      correction_budget_s_(config.correction_budget_ms * 1e-3),
+      step_budget_s_(config.keyframe_step_budget_ms * 1e-3),
       publisher_(publisher),
       corrections_(corrections),
       requests_(requests) {}
@@ -277,11 +277,12 @@ void MappingStep::applyCorrections() {
   }
 }
 
-void MappingStep::moveCorrectedKeyframes(std::int64_t cycle_start_ns) {
-  // Keyframes a correction moved are moved a few at a time, in what is left of this frame's
-  // budget, so that this stage's time per frame stays bounded however large the map is.
+void MappingStep::catchUp(std::int64_t cycle_start_ns) {
+  // New keyframes go in and keyframes a correction moved move a part at a time, in what is left
+  // of this frame's budget, so that this stage's time per frame stays bounded however large the
+  // map and the correction are.
   const double spent_s = 1e-9 * static_cast<double>(steadyNowNs() - cycle_start_ns);
-  const KeyframeMoveResult moved = mapper_.moveCorrectedKeyframes(correction_budget_s_ - spent_s);
+  const CatchUpResult moved = mapper_.catchUp(step_budget_s_ - spent_s);
   if (moved.caught_up) {
     SLAMD_LOG_DEBUG(kLog) << "map caught up with the corrections ("
                           << mapper_.stats().keyframes_moved << " keyframe moves so far)";
@@ -352,21 +353,28 @@ void MappingStep::process(const EstimatedPacket& packet) {
       keyframe_id = packet.odometry->keyframe->id;
     }
     const SE3 T_world_camera = T_world_uncorrected_ * packet.pose.T_world_camera;
-    const IntegrationResult result = mapper_.integrate(*packet.frame, T_world_camera, keyframe_id);
+    // A keyframe goes into the queue (kept, it goes in a part at a time, see catchUp); other
+    // frames go in at once.
+    const IntegrationResult result =
+        keyframe_id ? mapper_.addKeyframe(*packet.frame, T_world_camera, *keyframe_id)
+                    : mapper_.integrate(*packet.frame, T_world_camera);
     if (result.status == IntegrationStatus::kBadFrame ||
         result.status == IntegrationStatus::kBadPose) {
       // The pipeline counts a thrown error against this stage and carries on.
       throw std::runtime_error("frame not mapped: " + result.error);
     }
   }
-  moveCorrectedKeyframes(cycle_start_ns);
+  catchUp(cycle_start_ns);
   publishOutputs(mapper_.poll(mapper_.latestUtime()));
-  // Counting voxels walks the whole tree: once a second is plenty for the status channel.
-  if (steadyNowNs() >= next_voxel_count_ns_) {
+  // Counting voxels walks the whole tree (tens of milliseconds for millions of voxels): once a
+  // second is plenty for the status channel, and no more often than keeps the walks under 1% of
+  // this thread's time, so that they never make its p99.
+  if (const std::int64_t now_ns = steadyNowNs(); now_ns >= next_voxel_count_ns_) {
     const VoxelCounts counts = mapper_.countVoxels();
     leaf_voxels_.store(static_cast<std::int64_t>(counts.leaves), std::memory_order_relaxed);
     occupied_voxels_.store(static_cast<std::int64_t>(counts.occupied), std::memory_order_relaxed);
-    next_voxel_count_ns_ = steadyNowNs() + 1'000'000'000;
+    const std::int64_t walk_ns = steadyNowNs() - now_ns;
+    next_voxel_count_ns_ = now_ns + std::max<std::int64_t>(1'000'000'000, 100 * walk_ns);
   }
 }
 

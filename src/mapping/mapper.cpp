@@ -42,6 +42,9 @@ std::string poseError(const SE3& T) {
   return {};
 }
 
+/// Queue priority of steps done before any move (see Mapper::keyframes_queued_).
+constexpr double kFirst = std::numeric_limits<double>::infinity();
+
 /// A voxel's log-odds closer to zero than this after a contribution was taken out: nothing else
 /// saw it (sums of hits and misses are otherwise at least about 0.03 from zero).
 constexpr float kEmptyLogOdds = 1e-4f;
@@ -313,6 +316,17 @@ bool Mapper::rejectBadPose(const SE3& T_world_camera, IntegrationResult& result)
 
 IntegrationResult Mapper::integrate(const RgbdFrame& frame, const SE3& T_world_camera,
                                     std::optional<std::int64_t> keyframe_id) {
+  return integrateFrame(frame, T_world_camera, keyframe_id, /*queue_keyframe=*/false);
+}
+
+IntegrationResult Mapper::addKeyframe(const RgbdFrame& frame, const SE3& T_world_camera,
+                                      std::int64_t keyframe_id) {
+  return integrateFrame(frame, T_world_camera, keyframe_id, /*queue_keyframe=*/true);
+}
+
+IntegrationResult Mapper::integrateFrame(const RgbdFrame& frame, const SE3& T_world_camera,
+                                         std::optional<std::int64_t> keyframe_id,
+                                         bool queue_keyframe) {
   IntegrationResult result;
   if (rejectBadPose(T_world_camera, result)) return result;
   const auto t_cloud = Clock::now();
@@ -340,13 +354,8 @@ IntegrationResult Mapper::integrate(const RgbdFrame& frame, const SE3& T_world_c
   result.filter_ms = msSince(t_filter);
   result.points_filtered = filtered_.size();
   latest_utime_ = std::max(latest_utime_, frame.utime);
-
-  if (keyframe_id) forgetKeyframe(*keyframe_id);  // an id integrated again replaces the old one
-  result = insertCameraCloud(filtered_, T_world_camera, std::move(result));
-  if (result.status == IntegrationStatus::kOk && keyframe_id) {
-    result.keyframe_cloud_kept = keepKeyframe(*keyframe_id, filtered_, T_world_camera, frame.utime);
-  }
-  return result;
+  return insertFiltered(std::move(result), T_world_camera, keyframe_id, frame.utime,
+                        queue_keyframe);
 }
 
 IntegrationResult Mapper::integrateCloud(const PointCloud& cloud_camera, const SE3& T_world_camera,
@@ -369,18 +378,37 @@ IntegrationResult Mapper::integrateCloud(const PointCloud& cloud_camera, const S
   result.depth.valid = static_cast<std::int64_t>(filtered_.size());
   result.points_filtered = filtered_.size();
   latest_utime_ = std::max(latest_utime_, utime);
-  if (keyframe_id) forgetKeyframe(*keyframe_id);
-  result = insertCameraCloud(filtered_, T_world_camera, std::move(result));
-  if (result.status == IntegrationStatus::kOk && keyframe_id) {
-    result.keyframe_cloud_kept = keepKeyframe(*keyframe_id, filtered_, T_world_camera, utime);
+  return insertFiltered(std::move(result), T_world_camera, keyframe_id, utime, false);
+}
+
+IntegrationResult Mapper::insertFiltered(IntegrationResult result, const SE3& T_world_camera,
+                                         std::optional<std::int64_t> keyframe_id, Utime utime,
+                                         bool queue_keyframe) {
+  if (!keyframe_id) return insertCameraCloud(filtered_, T_world_camera, std::move(result));
+  forgetKeyframe(*keyframe_id);  // an id integrated again replaces the old one
+  if (rejectUninsertable(filtered_, T_world_camera, result)) return result;
+  if (!keepKeyframe(*keyframe_id, filtered_, T_world_camera, utime)) {
+    return insertCameraCloud(filtered_, T_world_camera, std::move(result));  // cannot move
   }
+  result.keyframe_cloud_kept = true;
+  ++stats_.frames_integrated;
+  stats_.points_inserted += static_cast<std::int64_t>(filtered_.size());
+  if (queue_keyframe) {
+    queueKeyframe(kFirst, *keyframe_id);
+    return result;
+  }
+  const auto t_insert = Clock::now();
+  KeyframeCloud& keyframe = keyframes_.at(*keyframe_id);
+  while (keyframe.parts_in_map < keyframe.parts) {
+    putPart(keyframe, keyframe.parts_in_map, Contribution::kPutIn);
+    ++keyframe.parts_in_map;
+  }
+  result.insert_ms = msSince(t_insert);
   return result;
 }
 
-IntegrationResult Mapper::insertCameraCloud(const PointCloud& cloud_camera,
-                                            const SE3& T_world_camera, IntegrationResult result,
-                                            Contribution contribution) {
-  const auto t_insert = Clock::now();
+bool Mapper::rejectUninsertable(const PointCloud& cloud_camera, const SE3& T_world_camera,
+                                IntegrationResult& result) {
   const Eigen::Vector3d t = T_world_camera.translation();
   const octomap::point3d origin(static_cast<float>(t.x()), static_cast<float>(t.y()),
                                 static_cast<float>(t.z()));
@@ -392,14 +420,25 @@ IntegrationResult Mapper::insertCameraCloud(const PointCloud& cloud_camera,
     result.status = IntegrationStatus::kBadPose;
     result.error = "sensor origin lies outside the map's extent";
     ++stats_.frames_bad_pose;
-    return result;
+    return true;
   }
   if (cloud_camera.empty()) {
     result.status = IntegrationStatus::kNoPoints;
     result.error = "no valid depth in the frame";
     ++stats_.frames_no_points;
-    return result;
+    return true;
   }
+  return false;
+}
+
+IntegrationResult Mapper::insertCameraCloud(const PointCloud& cloud_camera,
+                                            const SE3& T_world_camera, IntegrationResult result,
+                                            Contribution contribution) {
+  const auto t_insert = Clock::now();
+  if (rejectUninsertable(cloud_camera, T_world_camera, result)) return result;
+  const Eigen::Vector3d t = T_world_camera.translation();
+  const octomap::point3d origin(static_cast<float>(t.x()), static_cast<float>(t.y()),
+                                static_cast<float>(t.z()));
   const Eigen::Matrix3f R = T_world_camera.linear().cast<float>();
   const Eigen::Vector3f t_f = t.cast<float>();
   std::vector<Eigen::Vector3f>& world = scratch_->points_world;
@@ -549,14 +588,31 @@ bool Mapper::keepKeyframe(std::int64_t id, const PointCloud& cloud, const SE3& T
     return false;
   }
   KeyframeCloud& kept = keyframes_[id];
-  kept.cloud_camera.points.assign(cloud.points.begin(), cloud.points.end());
-  kept.cloud_camera.colors_bgr.assign(cloud.colors_bgr.begin(), cloud.colors_bgr.end());
+  kept = KeyframeCloud{};
+  // Sorted by elevation (image row), so that each part is a band of the image: rays of different
+  // parts then cross few voxels in common (each part's voxels are counted once, like a frame's).
+  std::vector<std::uint32_t> order(cloud.size());
+  std::vector<float> elevation(cloud.size());
+  for (std::size_t i = 0; i < cloud.size(); ++i) {
+    order[i] = static_cast<std::uint32_t>(i);
+    elevation[i] = std::atan2(cloud.points[i].y(), cloud.points[i].z());
+  }
+  std::stable_sort(order.begin(), order.end(), [&elevation](std::uint32_t a, std::uint32_t b) {
+    return elevation[a] < elevation[b];
+  });
+  const bool with_color = cloud.hasColor();
+  kept.cloud_camera.points.reserve(cloud.size());
+  for (const std::uint32_t i : order) {
+    kept.cloud_camera.points.push_back(cloud.points[i]);
+    if (with_color) kept.cloud_camera.colors_bgr.push_back(cloud.colors_bgr[i]);
+    kept.farthest_point_m =
+        std::max(kept.farthest_point_m, static_cast<double>(cloud.points[i].norm()));
+  }
+  kept.part_points = static_cast<std::size_t>(config_.keyframe_step_points);
+  kept.parts =
+      std::max<int>(1, static_cast<int>((cloud.size() + kept.part_points - 1) / kept.part_points));
   kept.T_world_camera = T_world_camera;
   kept.T_world_camera_in_map = T_world_camera;
-  kept.farthest_point_m = 0.0;
-  for (const Eigen::Vector3f& p : cloud.points) {
-    kept.farthest_point_m = std::max(kept.farthest_point_m, static_cast<double>(p.norm()));
-  }
   kept.utime = utime;
   stats_.keyframe_cloud_bytes = total + bytesOf(cloud);
   stats_.keyframe_clouds = static_cast<std::int64_t>(keyframes_.size());
@@ -931,12 +987,19 @@ void Mapper::requestResynchronisation() {
 
 void Mapper::forgetKeyframeClouds() {
   keyframes_.clear();
-  keyframes_to_move_.clear();
+  keyframes_queued_.clear();
   stats_.keyframe_clouds = 0;
   stats_.keyframe_cloud_bytes = 0;
 }
 
 // --- following corrections ----------------------------------------------------------------------
+
+void Mapper::queueKeyframe(double priority, std::int64_t id) {
+  // Sorted by (priority, id): the back is done first (highest priority, then newest).
+  const std::pair<double, std::int64_t> entry{priority, id};
+  keyframes_queued_.insert(
+      std::upper_bound(keyframes_queued_.begin(), keyframes_queued_.end(), entry), entry);
+}
 
 KeyframeCorrectionResult Mapper::correctKeyframePoses(
     const std::vector<std::pair<std::int64_t, SE3>>& keyframe_poses) {
@@ -951,105 +1014,130 @@ KeyframeCorrectionResult Mapper::correctKeyframePoses(
   }
   // The queue is rebuilt from every kept keyframe: one queued earlier may have been corrected
   // back to where it is in the map, and each moves once, to its newest pose.
-  keyframes_to_move_.clear();
+  keyframes_queued_.clear();
   const double half_voxel_m = 0.5 * resolution();
-  for (const auto& [id, keyframe] : keyframes_) {
-    if (keyframe.waiting_to_go_in || keyframe.to_forget) {
-      // Taken out by an earlier move, or to be forgotten: first.
-      keyframes_to_move_.emplace_back(std::numeric_limits<double>::infinity(), id);
+  for (auto& [id, keyframe] : keyframes_) {
+    if (keyframe.to_forget || keyframe.parts_in_map == 0) {
+      // To forget, new, or taken out by a move: first. The last goes in at its newest pose.
+      keyframes_queued_.emplace_back(kFirst, id);
+      if ((keyframe.moving || keyframe.to_move) && !keyframe.to_forget) ++result.keyframes_to_move;
       continue;
     }
-    if (!keyframe.T_world_camera_in_map) continue;
-    const SE3 delta = keyframe.T_world_camera_in_map->inverse() * keyframe.T_world_camera;
+    const SE3 delta = keyframe.T_world_camera_in_map.inverse() * keyframe.T_world_camera;
     const double angle_rad = Eigen::AngleAxisd(delta.linear()).angle();
     const double largest_shift_m =
         delta.translation().norm() + keyframe.farthest_point_m * angle_rad;
-    if (largest_shift_m > half_voxel_m) keyframes_to_move_.emplace_back(largest_shift_m, id);
+    keyframe.to_move = largest_shift_m > half_voxel_m;
+    if (keyframe.to_move) ++result.keyframes_to_move;
+    const bool partly_in = keyframe.parts_in_map < keyframe.parts;
+    if (partly_in) {
+      keyframes_queued_.emplace_back(kFirst, id);  // finish what was started
+    } else if (keyframe.to_move) {
+      keyframes_queued_.emplace_back(largest_shift_m, id);
+    }
   }
-  std::sort(keyframes_to_move_.begin(), keyframes_to_move_.end());
-  result.keyframes_to_move = keyframes_to_move_.size();
+  std::sort(keyframes_queued_.begin(), keyframes_queued_.end());
   return result;
 }
 
-KeyframeMoveResult Mapper::moveCorrectedKeyframes(double budget_s) {
+CatchUpResult Mapper::catchUp(double budget_s) {
   const auto start = Clock::now();
-  KeyframeMoveResult result;
-  // A move is two steps, each about one frame's ray casting: taking the keyframe out, and putting
-  // it in at its corrected pose. The budget is checked between steps.
-  bool stepped = false;
-  while (!keyframes_to_move_.empty() && budget_s > 0.0) {
-    if (stepped && secondsSince(start) >= budget_s) break;
-    const std::int64_t id = keyframes_to_move_.back().second;
-    const auto it = keyframes_.find(id);
-    if (it == keyframes_.end()) {  // forgotten since it was queued
-      keyframes_to_move_.pop_back();
-      continue;
-    }
-    stepped = true;
-    KeyframeCloud& keyframe = it->second;
-    if (keyframe.to_forget) {
-      keyframes_to_move_.pop_back();
-      forgetKeyframe(id);
-      continue;
-    }
-    if (keyframe.T_world_camera_in_map) {
-      takeOut(keyframe);
-      keyframe.waiting_to_go_in = true;
-      continue;
-    }
-    putIn(keyframe);
-    keyframe.waiting_to_go_in = false;
-    keyframes_to_move_.pop_back();
-    ++result.keyframes_moved;
-    ++stats_.keyframes_moved;
+  CatchUpResult result;
+  while (!keyframes_queued_.empty() && budget_s > 0.0) {
+    // A step is started only when one like the last fits in what is left of the budget.
+    if (result.steps > 0 && secondsSince(start) + last_step_s_ > budget_s) break;
+    const auto step_start = Clock::now();
+    const std::int64_t id = keyframes_queued_.back().second;
+    if (keyframeStep(id, result)) keyframes_queued_.pop_back();
+    last_step_s_ = secondsSince(step_start);
   }
-  result.keyframes_left = keyframes_to_move_.size();
-  result.caught_up = stepped && keyframes_to_move_.empty();
+  result.keyframes_left = keyframes_queued_.size();
+  result.caught_up = result.steps > 0 && keyframes_queued_.empty();
   if (result.caught_up) ++stats_.corrections_caught_up;
   // Voxels that became unknown (here or in forgetKeyframe()) reach subscribers once the map has
   // caught up, through one full map.
-  if (keyframes_to_move_.empty() && voxels_deleted_) requestResynchronisation();
+  if (keyframes_queued_.empty() && voxels_deleted_) requestResynchronisation();
   result.seconds = secondsSince(start);
   return result;
 }
 
-void Mapper::takeOut(KeyframeCloud& keyframe) {
-  if (!keyframe.T_world_camera_in_map) return;
-  // Moving a contribution is not new data: the per-frame totals stay as they were.
-  const MapperStats saved_stats = stats_;
-  insertCameraCloud(keyframe.cloud_camera, *keyframe.T_world_camera_in_map, {},
-                    Contribution::kTakeOut);
-  stats_ = saved_stats;
-  keyframe.T_world_camera_in_map.reset();
+bool Mapper::keyframeStep(std::int64_t id, CatchUpResult& result) {
+  const auto it = keyframes_.find(id);
+  if (it == keyframes_.end()) return true;  // forgotten since it was queued
+  KeyframeCloud& keyframe = it->second;
+  ++result.steps;
+  if ((keyframe.to_forget || keyframe.to_move) && keyframe.parts_in_map > 0) {
+    --keyframe.parts_in_map;
+    putPart(keyframe, keyframe.parts_in_map, Contribution::kTakeOut);
+    return false;
+  }
+  if (keyframe.to_forget) {
+    eraseKeyframe(it);
+    ++stats_.keyframes_taken_out;
+    return true;
+  }
+  if (keyframe.to_move) {
+    keyframe.to_move = false;
+    keyframe.moving = true;
+  }
+  if (keyframe.parts_in_map == 0) keyframe.T_world_camera_in_map = keyframe.T_world_camera;
+  putPart(keyframe, keyframe.parts_in_map, Contribution::kPutIn);
+  ++keyframe.parts_in_map;
+  if (keyframe.parts_in_map < keyframe.parts) return false;
+  if (keyframe.moving) {
+    keyframe.moving = false;
+    ++result.keyframes_moved;
+    ++stats_.keyframes_moved;
+  } else {
+    ++result.keyframes_added;
+  }
+  return true;
 }
 
-void Mapper::putIn(KeyframeCloud& keyframe) {
+void Mapper::putPart(const KeyframeCloud& keyframe, int part, Contribution contribution) {
+  const std::size_t size = keyframe.cloud_camera.size();
+  const std::size_t first = std::min(size, static_cast<std::size_t>(part) * keyframe.part_points);
+  const std::size_t last = std::min(size, first + keyframe.part_points);
+  part_.points.assign(keyframe.cloud_camera.points.begin() + first,
+                      keyframe.cloud_camera.points.begin() + last);
+  part_.colors_bgr.clear();
+  if (keyframe.cloud_camera.hasColor()) {
+    part_.colors_bgr.assign(keyframe.cloud_camera.colors_bgr.begin() + first,
+                            keyframe.cloud_camera.colors_bgr.begin() + last);
+  }
+  // Putting in or taking out a kept cloud is not new data: the per-frame totals stay as they
+  // were. A part that cannot go in (origin off the map, no points) cannot come out either.
   const MapperStats saved_stats = stats_;
-  const IntegrationResult r = insertCameraCloud(keyframe.cloud_camera, keyframe.T_world_camera, {});
+  insertCameraCloud(part_, keyframe.T_world_camera_in_map, {}, contribution);
   stats_ = saved_stats;
-  if (r.status == IntegrationStatus::kOk) keyframe.T_world_camera_in_map = keyframe.T_world_camera;
 }
 
 void Mapper::forgetKeyframeInSteps(std::int64_t keyframe_id) {
   const auto it = keyframes_.find(keyframe_id);
   if (it == keyframes_.end() || it->second.to_forget) return;
   it->second.to_forget = true;
-  keyframes_to_move_.emplace_back(std::numeric_limits<double>::infinity(), keyframe_id);
+  queueKeyframe(kFirst, keyframe_id);
 }
 
 void Mapper::forgetKeyframe(std::int64_t keyframe_id) {
   const auto it = keyframes_.find(keyframe_id);
   if (it == keyframes_.end()) return;
-  if (it->second.T_world_camera_in_map) {
-    takeOut(it->second);
-    ++stats_.keyframes_taken_out;
+  KeyframeCloud& keyframe = it->second;
+  if (keyframe.parts_in_map > 0) ++stats_.keyframes_taken_out;
+  while (keyframe.parts_in_map > 0) {
+    --keyframe.parts_in_map;
+    putPart(keyframe, keyframe.parts_in_map, Contribution::kTakeOut);
   }
+  eraseKeyframe(it);
+  // A queued entry for it is skipped when it comes up.
+}
+
+void Mapper::eraseKeyframe(std::map<std::int64_t, KeyframeCloud>::iterator it) {
   stats_.keyframe_cloud_bytes -=
       static_cast<std::int64_t>(it->second.cloud_camera.points.size() * sizeof(Eigen::Vector3f) +
                                 it->second.cloud_camera.colors_bgr.size() * sizeof(ColorBgr));
   keyframes_.erase(it);
   stats_.keyframe_clouds = static_cast<std::int64_t>(keyframes_.size());
-  // A queued entry for it is skipped when popped.
 }
 
 std::vector<std::int64_t> Mapper::keptKeyframeIds() const {

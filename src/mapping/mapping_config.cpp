@@ -105,10 +105,13 @@ const ConfigSchema<MappingConfig>& MappingConfig::schema() {
           .number("keyframe_cloud_budget_mb", &C::keyframe_cloud_budget_mb, 1, 65536, "MiB",
                   "memory the kept clouds may use; beyond it new clouds are not kept (counted) "
                   "and corrections do not move them")
-          .number("correction_budget_ms", &C::correction_budget_ms, 0.0, 10000.0, "ms",
-                  "the mapping stage's time per frame: keyframes a correction moved are moved in "
-                  "what integrating the frame left of it, a step (taking one out, or putting it "
-                  "in) at a time, at least one step when anything is left");
+          .number("keyframe_step_budget_ms", &C::keyframe_step_budget_ms, 0.0, 10000.0, "ms",
+                  "the mapping stage's time per frame: kept keyframes go in, and keyframes a "
+                  "correction moved move, in what the frame left of it, a step (a part taken out "
+                  "or put in) at a time, at least one step when anything is left")
+          .number("keyframe_step_points", &C::keyframe_step_points, 100, 10000000, "points",
+                  "a kept keyframe cloud goes into the map, and moves, in parts of this many "
+                  "points (bands of the image), a step each");
   return table;
 }
 

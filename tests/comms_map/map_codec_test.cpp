@@ -140,7 +140,7 @@ TEST(MapCodec, ALostUpdateOrARebuildWaitsForTheNextFullMap) {
     corrected.emplace_back(static_cast<std::int64_t>(i), T);
   }
   mapper.correctKeyframePoses(corrected);
-  ASSERT_TRUE(mapper.moveCorrectedKeyframes(1e9).caught_up);
+  ASSERT_TRUE(mapper.catchUp(1e9).caught_up);
   mapper.integrate(room.render(poses[0]), poses[0]);
   const MapperOutputs out = mapper.poll(utime + 1'000'000);
   ASSERT_TRUE(out.update.has_value());

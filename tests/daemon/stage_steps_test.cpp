@@ -10,6 +10,7 @@
 #include <chrono>
 #include <cstdint>
 #include <initializer_list>
+#include <limits>
 #include <thread>
 #include <vector>
 
@@ -328,7 +329,7 @@ std::size_t occupancyDisagreements(const octomap::OcTree& a, const octomap::OcTr
 TEST_F(DaemonStageSteps, TheMapFollowsACorrectionAStepPerFrameAndThenMatchesTheCorrectedPoses) {
   config_.set("mapping.full_map_period_s", "0");
   config_.set("mapping.update_rate_hz", "0");
-  config_.set("mapping.correction_budget_ms", "0.001");  // one step per frame
+  config_.set("mapping.keyframe_step_budget_ms", "0.001");  // one step per frame
   MappingConfig mapping_config = MappingConfig::load(config_);
   mapping_config.keyframes_only = true;  // as the daemon sets it when the back end runs
   Mapper mapper(mapping_config);
@@ -371,6 +372,9 @@ TEST_F(DaemonStageSteps, TheMapFollowsACorrectionAStepPerFrameAndThenMatchesTheC
     correction.keyframe_poses.emplace_back(i, T_true);
   }
   ASSERT_EQ(mapper.stats().keyframe_clouds, kFrames);
+  // The keyframes went into the queue; a step a frame has put only some of them in so far.
+  EXPECT_GT(mapper.keyframesQueued(), 0u);
+  mapper.catchUp(std::numeric_limits<double>::infinity());
   EXPECT_GT(occupancyDisagreements(*reference.ocTree(), *mapper.ocTree()), 1000u);
 
   ASSERT_TRUE(map_corrections.tryPush(MapCorrection{correction, 0}));
@@ -385,9 +389,9 @@ TEST_F(DaemonStageSteps, TheMapFollowsACorrectionAStepPerFrameAndThenMatchesTheC
   do {
     mapping.process(packet(laterFrame(), std::nullopt, SE3::Identity()));
     ++frames_to_catch_up;
-  } while (mapper.keyframesToMove() > 0 && frames_to_catch_up < 100);
-  // Keyframe 0 did not drift; each of the others is taken out, then put in: at most a step a
-  // frame with this budget (none in a frame whose budget the correction's bookkeeping used up).
+  } while (mapper.keyframesQueued() > 0 && frames_to_catch_up < 100);
+  // Keyframe 0 did not drift; each part of the others is taken out, then put in: at most a step
+  // a frame with this budget (none in a frame whose budget the correction's bookkeeping used up).
   EXPECT_GE(frames_to_catch_up, 2 * (kFrames - 1));
   EXPECT_LT(frames_to_catch_up, 100);
   EXPECT_EQ(mapper.stats().keyframes_moved, kFrames - 1);

@@ -1,5 +1,6 @@
 #include "slamd/mapping/mapper.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <memory>
@@ -301,8 +302,7 @@ TEST(Mapper, CorrectedKeyframesMoveAndTheMapEqualsMappingAtTheCorrectedPoses) {
   // Keyframe 0 did not drift in translation or rotation: it stays.
   EXPECT_EQ(queued.keyframes_to_move, truth.size() - 1);
   EXPECT_EQ(queued.unknown_ids, 1u);
-  const KeyframeMoveResult moved =
-      corrected.moveCorrectedKeyframes(std::numeric_limits<double>::infinity());
+  const CatchUpResult moved = corrected.catchUp(std::numeric_limits<double>::infinity());
   EXPECT_EQ(moved.keyframes_moved, truth.size() - 1);
   EXPECT_EQ(moved.keyframes_left, 0u);
   EXPECT_TRUE(moved.caught_up);
@@ -317,32 +317,33 @@ TEST(Mapper, CorrectedKeyframesMoveAndTheMapEqualsMappingAtTheCorrectedPoses) {
   expectSameVoxels(*corrected.ocTree(), *reference->ocTree());
   // Nothing left to do: a second identical correction queues nothing.
   EXPECT_EQ(corrected.correctKeyframePoses(poses).keyframes_to_move, 0u);
-  EXPECT_FALSE(corrected.moveCorrectedKeyframes(1.0).caught_up);
+  EXPECT_FALSE(corrected.catchUp(1.0).caught_up);
 }
 
 TEST(Mapper, KeyframesMoveWithinTheBudgetFarthestFirstAndFollowNewerCorrections) {
   const BoxRoom room;
   const std::vector<SE3> truth = test::lookAroundPoses(8);  // 24 overlapping views
-  const MappingConfig config = testConfig();
+  MappingConfig config = testConfig();
+  config.keyframe_step_points = 10'000'000;  // each keyframe in one part: two steps per move
   Mapper corrected(config);
   const std::vector<std::pair<std::int64_t, SE3>> poses = integrateDrifted(corrected, room, truth);
   ASSERT_EQ(corrected.correctKeyframePoses(poses).keyframes_to_move, truth.size() - 1);
   // No budget, no work.
-  EXPECT_EQ(corrected.moveCorrectedKeyframes(0.0).keyframes_moved, 0u);
-  EXPECT_EQ(corrected.keyframesToMove(), truth.size() - 1);
+  EXPECT_EQ(corrected.catchUp(0.0).keyframes_moved, 0u);
+  EXPECT_EQ(corrected.keyframesQueued(), truth.size() - 1);
   // A tiny budget still does one step per call: taking the farthest (the last keyframe) out,
   // then putting it in.
   constexpr double kTinyBudgetS = 1e-9;
-  KeyframeMoveResult step = corrected.moveCorrectedKeyframes(kTinyBudgetS);
+  CatchUpResult step = corrected.catchUp(kTinyBudgetS);
   EXPECT_EQ(step.keyframes_moved, 0u);
   EXPECT_EQ(step.keyframes_left, truth.size() - 1);
-  step = corrected.moveCorrectedKeyframes(kTinyBudgetS);
+  step = corrected.catchUp(kTinyBudgetS);
   EXPECT_EQ(step.keyframes_moved, 1u);
   EXPECT_EQ(step.keyframes_left, truth.size() - 2);
   EXPECT_FALSE(step.caught_up);
   // Partway, a newer correction moves every keyframe again (0.1 m along x): each one, moved
   // already or not, moves once more, to its newest pose.
-  for (int i = 0; i < 21; ++i) corrected.moveCorrectedKeyframes(kTinyBudgetS);  // 10.5 moves
+  for (int i = 0; i < 21; ++i) corrected.catchUp(kTinyBudgetS);  // 10.5 moves
   std::vector<SE3> final_poses = truth;
   std::vector<std::pair<std::int64_t, SE3>> newer = poses;
   for (std::size_t i = 0; i < newer.size(); ++i) {
@@ -353,8 +354,8 @@ TEST(Mapper, KeyframesMoveWithinTheBudgetFarthestFirstAndFollowNewerCorrections)
   EXPECT_EQ(queued.keyframes_to_move, truth.size());
   std::size_t moves = 0;
   std::size_t calls = 0;
-  while (corrected.keyframesToMove() > 0 && calls < 1000) {
-    step = corrected.moveCorrectedKeyframes(kTinyBudgetS);
+  while (corrected.keyframesQueued() > 0 && calls < 1000) {
+    step = corrected.catchUp(kTinyBudgetS);
     moves += step.keyframes_moved;
     ++calls;
   }
@@ -364,6 +365,57 @@ TEST(Mapper, KeyframesMoveWithinTheBudgetFarthestFirstAndFollowNewerCorrections)
   EXPECT_TRUE(step.caught_up);
   const std::unique_ptr<Mapper> reference = mapAt(room, truth, config, final_poses);
   expectSameVoxels(*corrected.ocTree(), *reference->ocTree());
+}
+
+TEST(Mapper, QueuedKeyframesGoInAPartAStepAndEqualKeyframesIntegratedAtOnce) {
+  const BoxRoom room;
+  const std::vector<SE3> truth = test::lookAroundPoses(4);
+  MappingConfig config = testConfig();
+  config.keyframe_step_points = 1500;
+  Mapper at_once(config);
+  Mapper queued(config);
+  int parts = 0;
+  for (std::size_t i = 0; i < truth.size(); ++i) {
+    const RgbdFrame frame = room.render(truth[i]);
+    const auto id = static_cast<std::int64_t>(i);
+    at_once.integrate(frame, truth[i], id);
+    const IntegrationResult added = queued.addKeyframe(frame, truth[i], id);
+    ASSERT_TRUE(added.keyframe_cloud_kept);
+    parts += static_cast<int>((added.points_filtered + 1499) / 1500);
+  }
+  ASSERT_GT(parts, static_cast<int>(2 * truth.size()));  // several parts per keyframe
+  EXPECT_EQ(queued.numLeafNodes(), 0u);                  // nothing in the map before catchUp
+  EXPECT_EQ(queued.stats().frames_integrated, static_cast<std::int64_t>(truth.size()));
+  int steps = 0;
+  CatchUpResult step;
+  while (queued.keyframesQueued() > 0 && steps < 10000) {
+    step = queued.catchUp(1e-9);
+    ASSERT_EQ(step.steps, 1u);
+    ++steps;
+  }
+  EXPECT_EQ(steps, parts);
+  EXPECT_TRUE(step.caught_up);
+  expectSameVoxels(*queued.ocTree(), *at_once.ocTree());
+
+  // Moved in parts, they still equal the map at the corrected poses.
+  std::vector<std::pair<std::int64_t, SE3>> corrected;
+  std::vector<SE3> corrected_poses;
+  for (std::size_t i = 0; i < truth.size(); ++i) {
+    SE3 T = truth[i];
+    T.translation() += Eigen::Vector3d(0.07, -0.04, 0.11);
+    corrected.emplace_back(static_cast<std::int64_t>(i), T);
+    corrected_poses.push_back(T);
+  }
+  EXPECT_EQ(queued.correctKeyframePoses(corrected).keyframes_to_move, truth.size());
+  steps = 0;
+  while (queued.keyframesQueued() > 0 && steps < 10000) {
+    queued.catchUp(1e-9);
+    ++steps;
+  }
+  EXPECT_EQ(steps, 2 * parts);
+  EXPECT_EQ(queued.stats().keyframes_moved, static_cast<std::int64_t>(truth.size()));
+  const std::unique_ptr<Mapper> reference = mapAt(room, truth, config, corrected_poses);
+  expectSameVoxels(*queued.ocTree(), *reference->ocTree());
 }
 
 TEST(Mapper, ACorrectionUnderHalfAVoxelLeavesTheKeyframeWhereItIs) {
@@ -425,16 +477,26 @@ TEST(Mapper, KeyframesForgottenInStepsGoFirstAndLeaveNothingBehind) {
   Mapper mapper(config);
   std::vector<std::pair<std::int64_t, SE3>> poses = integrateDrifted(mapper, room, truth);
   mapper.correctKeyframePoses(poses);
-  const std::size_t to_move = mapper.keyframesToMove();
+  const std::size_t to_move = mapper.keyframesQueued();
   mapper.forgetKeyframeInSteps(5);
   mapper.forgetKeyframeInSteps(5);  // once is enough
-  EXPECT_EQ(mapper.keyframesToMove(), to_move + 1);
-  // The first step forgets it; a later correction no longer moves it.
+  EXPECT_EQ(mapper.keyframesQueued(), to_move + 1);
+  // The first steps take its parts out and forget it, before any move; a later correction no
+  // longer moves it.
   const std::int64_t sequence_before = mapper.nextUpdateSequence();
-  EXPECT_EQ(mapper.moveCorrectedKeyframes(1e-9).keyframes_moved, 0u);
+  const auto kept = [&mapper](std::int64_t id) {
+    const std::vector<std::int64_t> ids = mapper.keptKeyframeIds();
+    return std::find(ids.begin(), ids.end(), id) != ids.end();
+  };
+  int steps = 0;
+  while (kept(5) && steps < 100) {
+    EXPECT_EQ(mapper.catchUp(1e-9).keyframes_moved, 0u);
+    ++steps;
+  }
+  EXPECT_GE(steps, 2);  // its parts, then the forgetting
   EXPECT_EQ(mapper.stats().keyframes_taken_out, 1);
   EXPECT_EQ(mapper.correctKeyframePoses(poses).unknown_ids, 1u);
-  mapper.moveCorrectedKeyframes(std::numeric_limits<double>::infinity());
+  mapper.catchUp(std::numeric_limits<double>::infinity());
   EXPECT_EQ(mapper.nextUpdateSequence(), sequence_before + 1);
   Mapper reference(config);
   for (std::size_t i = 0; i < truth.size(); ++i) {

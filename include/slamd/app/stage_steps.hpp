@@ -333,7 +333,7 @@ struct MappingStepStats {
 };
 
 /// Integrates each tracked frame (or keyframe) into the map at its corrected pose, moves the
-/// keyframes the back end's corrections move (within mapping.correction_budget_ms per frame),
+/// keyframes the back end's corrections move (within mapping.keyframe_step_budget_ms per frame),
 /// serves SAVE_MAP / PUBLISH_MAP and publishes the map.
 class MappingStep : public StepBase {
  public:
@@ -349,14 +349,14 @@ class MappingStep : public StepBase {
 
  private:
   void applyCorrections();
-  void moveCorrectedKeyframes(std::int64_t cycle_start_ns);
+  void catchUp(std::int64_t cycle_start_ns);
   /// Forgets the kept clouds of keyframes a correction no longer lists (culled by the back end).
   void forgetCulledKeyframes(const std::vector<std::pair<std::int64_t, SE3>>& keyframe_poses);
   void publishOutputs(const MapperOutputs& outputs);
 
   Mapper& mapper_;
   bool keyframes_only_;
-  double correction_budget_s_;  ///< per frame, for moving keyframes a correction moved
+  double step_budget_s_;  ///< per frame, for moving keyframes a correction moved
   DaemonPublisher& publisher_;
   EpochInbox<MapCorrection> corrections_;
   SpscQueue<MapRequest>* requests_;

@@ -11,8 +11,10 @@
 //     if (out.update) publish(toMapUpdateMessage(*out.update));    // slamd/comms/map_codec.hpp
 //     if (out.full_map) publish(toFullMapMessage(*out.full_map));
 //   on PUBLISH_MAP: mapper.requestFullMap();  on SAVE_MAP / shutdown: mapper.saveMaps(prefix);
-//   on corrected keyframe poses from the back end: mapper.correctKeyframePoses(poses);
-//   on every mapping cycle: mapper.moveCorrectedKeyframes(budget_s);  // bounded time per call
+//   with a back end: keyframes go in through the queue, a part at a time:
+//     mapper.addKeyframe(*frame, T_world_camera, keyframe_id);
+//     on corrected keyframe poses: mapper.correctKeyframePoses(poses);
+//     on every mapping cycle: mapper.catchUp(budget_s);  // bounded time per call
 //
 // Per frame: depth (CV_32FC1 metres, NaN = none) -> camera-frame cloud without NaN, inf, zero,
 // negative or out-of-range depths -> voxel-grid filter (camera frame) -> transform by
@@ -23,13 +25,15 @@
 // extent) never reaches OctoMap: it is rejected and counted in stats().
 //
 // Keyframes that follow corrections (config.keep_keyframe_clouds): a keyframe's filtered cloud is
-// kept, and its contribution to the map (the log-odds of every voxel its rays crossed or ended
-// in) can be taken out exactly by adding the negated updates at the pose it went in at. A
-// correction therefore moves only the keyframes it moves, within a time budget per call, and the
-// map never re-integrates its history. For the subtraction to be exact the log-odds are not
-// clamped in this mode (clamp_min and clamp_max are not applied): the map's value in a voxel is
-// the sum of the contributions of the keyframes that saw it, and culled keyframes are taken out.
-// A voxel whose contributions are all taken out is deleted (unknown again).
+// kept, sorted by image row and cut into parts of keyframe_step_points points (bands of the
+// image), and each part's contribution to the map (the log-odds of every voxel its rays crossed
+// or ended in, each voxel counted once per part) can be taken out exactly by adding the negated
+// updates at the pose it went in at. A correction therefore moves only the keyframes it moves, a
+// part at a time within a time budget per call, and the map never re-integrates its history. For
+// the subtraction to be exact the log-odds are not clamped in this mode (clamp_min and clamp_max
+// are not applied): the map's value in a voxel is the sum of the contributions of the keyframes
+// that saw it, and culled keyframes are taken out. A voxel whose contributions are all taken out is
+// deleted (unknown again).
 //
 // Frames: T_world_camera maps camera optical-frame points (x right, y down, z forward, metres)
 // into the map frame (config.frame_id). Every coordinate the Mapper returns is in the map frame.
@@ -133,11 +137,13 @@ struct KeyframeCorrectionResult {
   std::size_t unknown_ids = 0;        ///< ids in the request without a kept cloud, or bad poses
 };
 
-/// Result of moveCorrectedKeyframes().
-struct KeyframeMoveResult {
-  std::size_t keyframes_moved = 0;
-  std::size_t keyframes_left = 0;  ///< still queued (the budget ran out)
-  bool caught_up = false;          ///< this call moved the last queued keyframe
+/// Result of catchUp().
+struct CatchUpResult {
+  std::size_t steps = 0;            ///< parts put in or taken out, keyframes forgotten
+  std::size_t keyframes_added = 0;  ///< new keyframes now wholly in the map
+  std::size_t keyframes_moved = 0;  ///< keyframes now wholly in at their corrected poses
+  std::size_t keyframes_left = 0;   ///< still queued (the budget ran out)
+  bool caught_up = false;           ///< this call did the last queued step
   double seconds = 0.0;
 };
 
@@ -156,6 +162,11 @@ class Mapper {
   /// replaced (its earlier contribution taken out first).
   IntegrationResult integrate(const RgbdFrame& frame, const SE3& T_world_camera,
                               std::optional<std::int64_t> keyframe_id = std::nullopt);
+  /// A keyframe (keep_keyframe_clouds): its filtered cloud is kept and queued; catchUp() puts it
+  /// in, a part at a time, before any move. A cloud the memory budget refuses goes in at once and
+  /// cannot be moved (as without keep_keyframe_clouds).
+  IntegrationResult addKeyframe(const RgbdFrame& frame, const SE3& T_world_camera,
+                                std::int64_t keyframe_id);
 
   /// Integrates a cloud already in the camera frame (no depth conversion, no filter).
   /// @param cloud_camera points in the camera optical frame, metres (non-finite points dropped).
@@ -205,23 +216,24 @@ class Mapper {
   // --- following corrections -----------------------------------------------------------------
   /// Sets the corrected pose (T_world_camera, map frame) of kept keyframes. A keyframe whose
   /// cloud would move by more than half a voxel (translation plus rotation angle times its
-  /// farthest point's distance) is queued for moveCorrectedKeyframes(); the others stay where they
-  /// are. Corrections may come faster than the queue empties: each keyframe moves once, to its
-  /// newest pose.
+  /// farthest point's distance) is queued for catchUp(); the others stay where they are.
+  /// Corrections may come faster than the queue empties: each keyframe moves once, to its newest
+  /// pose.
   KeyframeCorrectionResult correctKeyframePoses(
       const std::vector<std::pair<std::int64_t, SE3>>& keyframe_poses);
-  /// Moves queued keyframes, farthest move first, in steps of about one frame's ray casting: a
-  /// keyframe's contribution is taken out at the pose it went in at, then put in at its corrected
-  /// pose. With budget_s > 0, does at least one step and starts none once budget_s has been
-  /// spent; with budget_s <= 0, nothing. Once nothing is left to move, if voxels became unknown
-  /// (which updates cannot say), subscribers resynchronise from the full map the next poll()
-  /// emits.
-  KeyframeMoveResult moveCorrectedKeyframes(double budget_s);
-  std::size_t keyframesToMove() const { return keyframes_to_move_.size(); }
+  /// Works through the queue: keyframes to forget and new keyframes first, then keyframes to
+  /// move, farthest move first. A step takes one part of a keyframe out (at the pose it went in
+  /// at) or puts one in (at its corrected pose), about 1/parts of a frame's ray casting. With
+  /// budget_s > 0, does at least one step and starts no other that would not fit (judged by the
+  /// last step's time); with
+  /// budget_s <= 0, nothing. Once the queue is empty, if voxels became unknown (which updates
+  /// cannot say), subscribers resynchronise from the full map the next poll() emits.
+  CatchUpResult catchUp(double budget_s);
+  std::size_t keyframesQueued() const { return keyframes_queued_.size(); }
   /// Forgets a keyframe (culled by the back end): its contribution is taken out of the map and
   /// its cloud dropped.
   void forgetKeyframe(std::int64_t keyframe_id);
-  /// forgetKeyframe() as a step of moveCorrectedKeyframes(), done before any move.
+  /// forgetKeyframe() in catchUp()'s steps, before any move.
   void forgetKeyframeInSteps(std::int64_t keyframe_id);
   /// Ids of the kept keyframe clouds (forgotten in steps or not yet), in increasing order.
   std::vector<std::int64_t> keptKeyframeIds() const;
@@ -250,11 +262,14 @@ class Mapper {
 
  private:
   struct KeyframeCloud {
-    PointCloud cloud_camera;
-    SE3 T_world_camera = SE3::Identity();  ///< newest pose (corrected)
-    /// The pose its contribution is in the map at; none when it could not be put in.
-    std::optional<SE3> T_world_camera_in_map;
-    bool waiting_to_go_in = false;  ///< taken out by a move that has not put it in yet
+    PointCloud cloud_camera;                      ///< sorted by elevation (image row)
+    SE3 T_world_camera = SE3::Identity();         ///< newest pose (corrected)
+    SE3 T_world_camera_in_map = SE3::Identity();  ///< the pose its parts in the map went in at
+    std::size_t part_points = 1;
+    int parts = 1;
+    int parts_in_map = 0;           ///< parts 0 .. parts_in_map - 1 are in the map
+    bool to_move = false;           ///< its parts come out, then go in at T_world_camera
+    bool moving = false;            ///< counted as moved once it is wholly in again
     bool to_forget = false;         ///< forgetKeyframeInSteps() was called
     double farthest_point_m = 0.0;  ///< lever arm for rotations
     Utime utime = 0;
@@ -268,10 +283,22 @@ class Mapper {
   template <typename Tree>
   void insertIntoTree(Tree& tree, const octomap::point3d& origin, const PointCloud& cloud_camera,
                       Contribution contribution, IntegrationResult& result);
-  /// Takes a kept keyframe's contribution out of the map (map statistics unchanged).
-  void takeOut(KeyframeCloud& keyframe);
-  /// Puts a kept keyframe's contribution in at its newest pose (map statistics unchanged).
-  void putIn(KeyframeCloud& keyframe);
+  IntegrationResult integrateFrame(const RgbdFrame& frame, const SE3& T_world_camera,
+                                   std::optional<std::int64_t> keyframe_id, bool queue_keyframe);
+  /// Integrates filtered_, or keeps it as a keyframe (queued, or put in at once).
+  IntegrationResult insertFiltered(IntegrationResult result, const SE3& T_world_camera,
+                                   std::optional<std::int64_t> keyframe_id, Utime utime,
+                                   bool queue_keyframe);
+  /// True (and counted) when the sensor origin is off the map or the cloud is empty.
+  bool rejectUninsertable(const PointCloud& cloud_camera, const SE3& T_world_camera,
+                          IntegrationResult& result);
+  /// Puts one part of a kept keyframe in, or takes it out, at T_world_camera_in_map (map
+  /// statistics unchanged).
+  void putPart(const KeyframeCloud& keyframe, int part, Contribution contribution);
+  /// One step of catchUp() on a keyframe; true when it is done with it.
+  bool keyframeStep(std::int64_t id, CatchUpResult& result);
+  void queueKeyframe(double priority, std::int64_t id);
+  void eraseKeyframe(std::map<std::int64_t, KeyframeCloud>::iterator it);
   bool rejectBadPose(const SE3& T_world_camera, IntegrationResult& result);
   void makeEmptyTree(double resolution_m, bool color);
   void configureTree();
@@ -295,8 +322,11 @@ class Mapper {
   PointCloud cloud_;
   PointCloud filtered_;
   std::map<std::int64_t, KeyframeCloud> keyframes_;
-  /// Keyframes to move, ordered by how far they move (farthest last, popped first).
-  std::vector<std::pair<double, std::int64_t>> keyframes_to_move_;
+  /// Keyframes with steps to do, by (priority, id): the back is done first. Priority: infinite
+  /// for keyframes to forget, new ones and ones partly in the map; otherwise how far they move.
+  std::vector<std::pair<double, std::int64_t>> keyframes_queued_;
+  PointCloud part_;              ///< scratch: one part of a kept cloud
+  double last_step_s_ = 0.0;     ///< how long catchUp()'s last step took
   bool voxels_deleted_ = false;  ///< since the last full map request
   MapperStats stats_;
   bool inner_dirty_ = false;

@@ -67,7 +67,8 @@ struct MappingConfig {
   // --- re-integration (back end) -------------------------------------------------------------
   bool keep_keyframe_clouds = true;
   int keyframe_cloud_budget_mb = 1024;
-  double correction_budget_ms = 20.0;
+  double keyframe_step_budget_ms = 20.0;
+  int keyframe_step_points = 4000;
 
   /// The `mapping.*` keys.
   static const ConfigSchema<MappingConfig>& schema();
