@@ -1065,6 +1065,9 @@ bool Mapper::keyframeStep(std::int64_t id, CatchUpResult& result) {
   const auto it = keyframes_.find(id);
   if (it == keyframes_.end()) return true;  // forgotten since it was queued
   KeyframeCloud& keyframe = it->second;
+  const bool wholly_in_place =
+      !keyframe.to_forget && !keyframe.to_move && keyframe.parts_in_map == keyframe.parts;
+  if (wholly_in_place) return true;  // queued twice (an id integrated again): nothing to do
   ++result.steps;
   if ((keyframe.to_forget || keyframe.to_move) && keyframe.parts_in_map > 0) {
     --keyframe.parts_in_map;

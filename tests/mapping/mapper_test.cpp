@@ -461,13 +461,21 @@ TEST(Mapper, AForgottenKeyframeLeavesTheMapAsIfItHadNeverBeenThere) {
   for (const std::int64_t id : mapper.keptKeyframeIds()) mapper.forgetKeyframe(id);
   EXPECT_EQ(mapper.numLeafNodes(), 0u);
   EXPECT_TRUE(mapper.keptKeyframeIds().empty());
-  // Integrating an id again replaces its contribution instead of adding a second one.
+  // Integrating an id again replaces its contribution instead of adding a second one, at once
+  // or through the queue.
   Mapper twice(config);
   Mapper once(config);
   twice.integrate(room.render(views[1]), views[0], 3);
   twice.integrate(room.render(views[0]), views[0], 3);
   once.integrate(room.render(views[0]), views[0], 3);
   expectSameVoxels(*twice.ocTree(), *once.ocTree());
+  Mapper queued_twice(config);
+  queued_twice.addKeyframe(room.render(views[1]), views[0], 3);
+  queued_twice.catchUp(1e-9);  // one part of the first cloud in
+  queued_twice.addKeyframe(room.render(views[0]), views[0], 3);
+  queued_twice.catchUp(std::numeric_limits<double>::infinity());
+  EXPECT_EQ(queued_twice.keyframesQueued(), 0u);
+  expectSameVoxels(*queued_twice.ocTree(), *once.ocTree());
 }
 
 TEST(Mapper, KeyframesForgottenInStepsGoFirstAndLeaveNothingBehind) {
