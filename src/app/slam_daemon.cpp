@@ -752,6 +752,18 @@ bool SlamDaemon::Impl::writeMetrics(const std::vector<StageStats>& stats) {
     json.key("max_optimization_ms").value(summary.max_optimization_ms);
     json.endObject();
   }
+  if (mapper) {
+    // Kept keyframe clouds and how the map followed the back end's corrections (issue 24).
+    const MapperStats& map_stats = mapper->stats();
+    json.key("mapping").beginObject();
+    json.key("frames_integrated").value(map_stats.frames_integrated);
+    json.key("keyframe_clouds").value(map_stats.keyframe_clouds);
+    json.key("keyframe_cloud_bytes").value(map_stats.keyframe_cloud_bytes);
+    json.key("keyframes_moved").value(map_stats.keyframes_moved);
+    json.key("keyframes_taken_out").value(map_stats.keyframes_taken_out);
+    json.key("corrections_caught_up").value(map_stats.corrections_caught_up);
+    json.endObject();
+  }
   json.key("stages").beginObject();
   for (const auto& stage : stats) {
     json.key(stage.name).beginObject();
