@@ -225,9 +225,9 @@ class Mapper {
   /// move, farthest move first. A step takes one part of a keyframe out (at the pose it went in
   /// at) or puts one in (at its corrected pose), about 1/parts of a frame's ray casting. With
   /// budget_s > 0, does at least one step and starts no other that would not fit (judged by the
-  /// last step's time); with
-  /// budget_s <= 0, nothing. Once the queue is empty, if voxels became unknown (which updates
-  /// cannot say), subscribers resynchronise from the full map the next poll() emits.
+  /// last step's time); with budget_s <= 0, nothing. Once the queue is empty, if voxels became
+  /// unknown (which updates cannot say), subscribers resynchronise from the full map the next
+  /// poll() emits.
   CatchUpResult catchUp(double budget_s);
   std::size_t keyframesQueued() const { return keyframes_queued_.size(); }
   /// Forgets a keyframe (culled by the back end): its contribution is taken out of the map and
