@@ -21,8 +21,21 @@ constexpr const char* kComponent = "capture.openni2";
 
 // Debian's DummyDevice driver does not join its frame thread in stop(): destroying a stream right
 // after stopping it lets that thread touch freed memory (a crash seen here about one run in
-// three). Waiting a few frame periods lets the thread see the stop flag. A shutdown-only cost.
-void waitForDriverThreads() { std::this_thread::sleep_for(std::chrono::milliseconds(100)); }
+// three). Waiting a few frame periods lets the thread see the stop flag. A close-only cost.
+void waitForDriverThreads() { std::this_thread::sleep_for(std::chrono::milliseconds(200)); }
+
+// The same driver's frame thread sets its running flag when it starts, so a stop() that comes
+// before the thread has run undoes nothing and the thread outlives its stream (seen under
+// AddressSanitizer on a loaded machine, where a thread can start late). A stream that delivered
+// a frame has a running thread; one that has not is given a bounded wait for its first frame.
+void waitForFirstFrame(openni::VideoStream& stream) {
+  openni::VideoStream* streams[1] = {&stream};
+  int index = -1;
+  if (openni::OpenNI::waitForAnyStream(streams, 1, &index, 1000) == openni::STATUS_OK) {
+    openni::VideoFrameRef frame;
+    stream.readFrame(&frame);
+  }
+}
 
 // OpenNI2 is process-wide: initialised on first use, never shut down (see the header).
 void ensureOpenNi() {
@@ -188,6 +201,12 @@ struct OpenNi2Source::Impl {
   openni::VideoStream color;
   bool has_color = false;
   bool opened = false;
+  bool live = false;  // a device, not a recording
+  // Whether each stream was started, and delivered a frame since (see waitForFirstFrame).
+  bool depth_started = false;
+  bool color_started = false;
+  bool depth_delivered = false;
+  bool color_delivered = false;
   double depth_scale = 1000.0;  // raw units per metre, from the depth pixel format
   /// Depth registered to colour, as the device (or the recording's device properties) says;
   /// unset when it cannot tell.
@@ -198,6 +217,11 @@ struct OpenNi2Source::Impl {
   int last_color_index = -1;
   openni::VideoFrameRef pending_depth;
   openni::VideoFrameRef pending_color;
+  // Host arrival times of the pending frames, for devices whose streams do not share a clock.
+  std::chrono::steady_clock::time_point pending_depth_arrival;
+  std::chrono::steady_clock::time_point pending_color_arrival;
+  int frames_unpaired_in_a_row = 0;
+  bool pair_by_arrival = false;
   CameraIntrinsics device_intrinsics;
   // Live devices: device clock -> wall clock.
   bool clock_anchored = false;
@@ -213,6 +237,11 @@ struct OpenNi2Source::Impl {
     pending_depth.release();
     pending_color.release();
     const bool running = depth.isValid() || color.isValid();
+    if (live && depth_started && !depth_delivered) waitForFirstFrame(depth);
+    if (live && color_started && !color_delivered) waitForFirstFrame(color);
+    depth_started = color_started = depth_delivered = color_delivered = false;
+    frames_unpaired_in_a_row = 0;
+    pair_by_arrival = false;
     if (depth.isValid()) depth.stop();
     if (color.isValid()) color.stop();
     if (running) waitForDriverThreads();
@@ -266,6 +295,7 @@ void openDevice(OpenNi2Source::Kind kind, const std::string& uri, const OpenNi2C
                       (uri.empty() ? "first device" : uri) + "'" + lastError() + hint);
   }
   s.opened = true;
+  s.live = kind == OpenNi2Source::Kind::kDevice;
   if (s.depth.create(s.device, openni::SENSOR_DEPTH) != openni::STATUS_OK) {
     s.closeAll();
     throw SourceError(std::string("OpenNI2 ") + what + " '" + uri + "' has no depth stream" +
@@ -335,11 +365,13 @@ void openDevice(OpenNi2Source::Kind kind, const std::string& uri, const OpenNi2C
   }
   s.depth_scale = depth_format == openni::PIXEL_FORMAT_DEPTH_100_UM ? 10000.0 : 1000.0;
 
-  if (s.depth.start() != openni::STATUS_OK) {
+  s.depth_started = s.depth.start() == openni::STATUS_OK;
+  if (!s.depth_started) {
     s.closeAll();
     throw SourceError(std::string("cannot start depth stream of '") + uri + "'" + lastError());
   }
-  if (s.has_color && s.color.start() != openni::STATUS_OK) {
+  s.color_started = s.has_color && s.color.start() == openni::STATUS_OK;
+  if (s.has_color && !s.color_started) {
     SLAMD_LOG_WARN(kComponent) << "colour stream failed to start" << lastError() << "; depth only";
     s.color.destroy();
     s.has_color = false;
@@ -488,18 +520,38 @@ bool OpenNi2Source::pendingFramesArePaired() {
   Impl& s = *impl_;
   if (!s.pending_depth.isValid() || (s.has_color && !s.pending_color.isValid())) return false;
   if (!s.has_color) return true;
-  // With sync on, the two frames carry (nearly) the same device timestamp.
+  // With sync on, the two frames carry (nearly) the same device timestamp. A live device whose
+  // streams keep their own clocks (the DummyDevice numbers each stream's frames, and its two
+  // threads fall a frame apart on a loaded machine) would never pair again: after two seconds'
+  // worth of frames without a partner, pair by host arrival time instead.
   const int fps = std::max(1, s.depth.getVideoMode().getFps());
   const auto half_period_us = static_cast<std::int64_t>(500000 / fps);
-  const auto td = static_cast<std::int64_t>(s.pending_depth.getTimestamp());
-  const auto tc = static_cast<std::int64_t>(s.pending_color.getTimestamp());
-  if (std::llabs(td - tc) <= half_period_us) return true;
+  std::int64_t td = static_cast<std::int64_t>(s.pending_depth.getTimestamp());
+  std::int64_t tc = static_cast<std::int64_t>(s.pending_color.getTimestamp());
+  if (s.pair_by_arrival) {
+    td = std::chrono::duration_cast<std::chrono::microseconds>(
+             s.pending_depth_arrival.time_since_epoch())
+             .count();
+    tc = std::chrono::duration_cast<std::chrono::microseconds>(
+             s.pending_color_arrival.time_since_epoch())
+             .count();
+  }
+  if (std::llabs(td - tc) <= half_period_us) {
+    s.frames_unpaired_in_a_row = 0;
+    return true;
+  }
   // The older one has no partner any more: drop it and wait for the next.
   if (td < tc) {
     s.pending_depth.release();
     countLostDepthFrame();
   } else {
     s.pending_color.release();
+  }
+  if (kind_ == Kind::kDevice && !s.pair_by_arrival && ++s.frames_unpaired_in_a_row >= 2 * fps) {
+    s.pair_by_arrival = true;
+    counters_.failure(kComponent, description() + ": " + std::to_string(2 * fps) +
+                                      " frames in a row found no partner with their device " +
+                                      "timestamp; pairing depth and colour by arrival time");
   }
   return false;
 }
@@ -597,6 +649,7 @@ FrameRead OpenNi2Source::next(std::chrono::milliseconds timeout) {
     openni::VideoFrameRef frame;
     if (streams[index]->readFrame(&frame) != openni::STATUS_OK || !frame.isValid()) continue;
     s.last_frame_time = std::chrono::steady_clock::now();
+    (index == 0 ? s.depth_delivered : s.color_delivered) = true;
     if (index == 0) {
       if (s.pending_depth.isValid()) countLostDepthFrame();  // replaced before its colour came
       if (kind_ == Kind::kFile && config_.oni_realtime) {
@@ -609,9 +662,11 @@ FrameRead OpenNi2Source::next(std::chrono::milliseconds timeout) {
       }
       s.last_depth_index = frame.getFrameIndex();
       s.pending_depth = frame;
+      s.pending_depth_arrival = s.last_frame_time;
     } else {
       s.last_color_index = frame.getFrameIndex();
       s.pending_color = frame;
+      s.pending_color_arrival = s.last_frame_time;
     }
     if (pendingFramesArePaired()) return frameFromPendingPair();
   }
