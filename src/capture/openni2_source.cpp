@@ -526,22 +526,18 @@ bool OpenNi2Source::pendingFramesArePaired() {
   // worth of frames without a partner, pair by host arrival time instead.
   const int fps = std::max(1, s.depth.getVideoMode().getFps());
   const auto half_period_us = static_cast<std::int64_t>(500000 / fps);
-  std::int64_t td = static_cast<std::int64_t>(s.pending_depth.getTimestamp());
-  std::int64_t tc = static_cast<std::int64_t>(s.pending_color.getTimestamp());
-  if (s.pair_by_arrival) {
-    td = std::chrono::duration_cast<std::chrono::microseconds>(
-             s.pending_depth_arrival.time_since_epoch())
-             .count();
-    tc = std::chrono::duration_cast<std::chrono::microseconds>(
-             s.pending_color_arrival.time_since_epoch())
-             .count();
-  }
-  if (std::llabs(td - tc) <= half_period_us) {
+  const std::int64_t depth_after_color_us =
+      s.pair_by_arrival ? std::chrono::duration_cast<std::chrono::microseconds>(
+                              s.pending_depth_arrival - s.pending_color_arrival)
+                              .count()
+                        : static_cast<std::int64_t>(s.pending_depth.getTimestamp()) -
+                              static_cast<std::int64_t>(s.pending_color.getTimestamp());
+  if (std::llabs(depth_after_color_us) <= half_period_us) {
     s.frames_unpaired_in_a_row = 0;
     return true;
   }
   // The older one has no partner any more: drop it and wait for the next.
-  if (td < tc) {
+  if (depth_after_color_us < 0) {
     s.pending_depth.release();
     countLostDepthFrame();
   } else {
