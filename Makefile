@@ -2,7 +2,7 @@
 #   make run    (installs dependencies, builds, runs slamd on a built-in synthetic world)
 #   make test   (installs dependencies, builds, runs every test, then the concurrency tests
 #                under ThreadSanitizer and every test under AddressSanitizer + UBSan)
-# Other targets: deps, build, bench, soak, tsan, asan, ubsan, asan-ubsan, fuzz, clean.
+# Other targets: deps, build, bench, bench-corridors, soak, tsan, asan, ubsan, asan-ubsan, fuzz, clean.
 
 BUILD_DIR ?= build
 JOBS ?= 2
@@ -11,7 +11,7 @@ CMAKE_ARGS ?=
 WERROR ?= OFF
 CTEST_ARGS ?=
 
-.PHONY: all deps build test unit-test run bench soak tsan asan ubsan asan-ubsan fuzz clean
+.PHONY: all deps build test unit-test run bench bench-corridors soak tsan asan ubsan asan-ubsan fuzz clean
 
 all: build
 
@@ -34,6 +34,11 @@ run: build
 
 bench: build
 	@bash scripts/run-bench.sh $(BUILD_DIR)
+
+# Full SLAM on textured corridors drawn from the evaluation seeds (issue 22's suite): ATE, frames
+# posed, keyframes per metre, worst per-frame rotation (out/bench/corridors/results.md).
+bench-corridors: build
+	@bash scripts/bench-corridors.sh $(BUILD_DIR)
 
 # fr1/xyz played forward and backward 10 times in real time (4.4 min): memory, keyframes, map
 # size and latency over time (out/soak/soak.json, soak.svg).

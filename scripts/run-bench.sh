@@ -9,7 +9,8 @@
 # Adding a case is one line in CASES below. Environment: SLAMD_DATA_DIR (default ../shared/data),
 # SLAMD_BENCH_OUT (out/bench), SLAMD_BENCH_TOLERANCE (0.25 = 25% worse is a regression),
 # SLAMD_BENCH_MICRO=0 skips the Google Benchmark programs, SLAMD_BENCH_FLOOD=0 the LCM flood
-# benchmark (scripts/bench-lcm-flood.sh), SLAMD_BENCH_FAIL_ON_REGRESSION=1 makes a regression fail
+# benchmark (scripts/bench-lcm-flood.sh), SLAMD_BENCH_CORRIDORS=0 the corridor suite
+# (scripts/bench-corridors.sh), SLAMD_BENCH_FAIL_ON_REGRESSION=1 makes a regression fail
 # the command.
 set -euo pipefail
 BUILD_DIR=$(cd "${1:-build}" && pwd)
@@ -112,6 +113,12 @@ fi
 if [ "${SLAMD_BENCH_FLOOD:-1}" != 0 ]; then
   OUT="$OUT/lcm_flood" bash "$ROOT/scripts/bench-lcm-flood.sh" "$BUILD_DIR" ||
     echo "bench: the LCM flood benchmark failed (see $OUT/lcm_flood)"
+fi
+
+# The corridor suite (issue 22): full SLAM on the evaluation seeds' varied corridors.
+if [ "${SLAMD_BENCH_CORRIDORS:-1}" != 0 ]; then
+  SLAMD_BENCH_OUT="$OUT" bash "$ROOT/scripts/bench-corridors.sh" "$BUILD_DIR" ||
+    echo "bench: the corridor suite failed (see $OUT/corridors)"
 fi
 
 # Regressions against the committed baseline (same "case key value" lines inside a JSON string

@@ -709,6 +709,7 @@ bool SlamDaemon::Impl::writeMetrics(const std::vector<StageStats>& stats) {
   json.beginObject();
   json.key("program").value("slamd");
   json.key("source").value(daemon.source);
+  json.key("source_description").value(source->description());
   json.key("live").value(source->isLive());
   json.key("frames_captured").value(static_cast<std::int64_t>(summary.frames_captured));
   json.key("poses_published").value(static_cast<std::int64_t>(summary.poses_published));

@@ -81,6 +81,10 @@ const ConfigSchema<MotionParams>& MotionParams::schema() {
                   "one full left-right-left cycle")
           .number("step_hz", &C::step_hz, 0.5, 4.0, "Hz", "walking step frequency (head bob)")
           .number("head_bob_m", &C::head_bob_m, 0.0, 0.1, "m", "vertical bob amplitude")
+          .number("look_around_deg", &C::look_around_deg, 0.0, 60.0, "deg",
+                  "walkers look left and right: yaw oscillation amplitude; 0 = look ahead")
+          .number("look_around_hz", &C::look_around_hz, 0.05, 2.0, "Hz",
+                  "frequency of the look-around oscillation")
           .number("robot_speed_mps", &C::robot_speed_mps, 0.05, 3.0, "m/s", "robot speed")
           .number("robot_height_m", &C::robot_height_m, 0.2, 2.2, "m", "camera height of the robot")
           .number("max_speed_mps", &C::max_speed_mps, 0.01, 3.0, "m/s",
@@ -248,8 +252,10 @@ SE3 CameraMotion::walkPose(double t_s, bool zigzag) const {
 
   // The walker half-turns the camera into the zigzag, with small hand tremor and gait rotations.
   const double deg = M_PI / 180.0;
-  const double yaw =
-      heading + 0.6 * std::atan(lateral_slope) + 2.0 * deg * signals_[kYawJitter].at(t_s);
+  const double look_around =
+      params_.look_around_deg * deg * std::sin(2.0 * M_PI * params_.look_around_hz * t_s);
+  const double yaw = heading + 0.6 * std::atan(lateral_slope) + look_around +
+                     2.0 * deg * signals_[kYawJitter].at(t_s);
   const double pitch =
       -6.0 * deg + 1.5 * deg * signals_[kPitchJitter].at(t_s) + 0.5 * deg * std::cos(step_phase);
   const double roll =

@@ -41,6 +41,8 @@ int clipNear(const std::array<Eigen::Vector3d, 4>& in, double near_m,
 }
 
 constexpr double kEdgeTolerance = 1e-9;  ///< closes cracks between rectangles sharing an edge
+constexpr double kShininess = 40.0;      ///< Blinn-Phong exponent: tight highlights of gloss paint
+constexpr double kHighlightLevels = 120.0;  ///< grey levels added by a full-strength highlight
 
 }  // namespace
 
@@ -49,6 +51,8 @@ Renderer::Renderer(const Scene& scene, const CameraIntrinsics& intrinsics,
     : scene_(scene), intrinsics_(intrinsics) {
   const Eigen::Vector3d key = lighting.key_direction_world.normalized();
   const Eigen::Vector3d fill = lighting.fill_direction_world.normalized();
+  key_direction_world_ = key;
+  key_strength_ = lighting.key_strength;
   shade_.reserve(scene.rects.size());
   for (const auto& rect : scene.rects) {
     const Eigen::Vector3d n = rect.normal();
@@ -57,6 +61,53 @@ Renderer::Renderer(const Scene& scene, const CameraIntrinsics& intrinsics,
                          lighting.fill_strength * std::max(0.0, n.dot(fill));
     shade_.push_back(static_cast<float>(shade));
   }
+}
+
+Renderer::PointLight Renderer::lightAt(const Eigen::Vector3d& p_world,
+                                       const Eigen::Vector3d& normal_world,
+                                       const Eigen::Vector3d& to_eye_world, bool glossy) const {
+  PointLight light;
+  double specular = 0.0;
+  const auto highlight = [&](const Eigen::Vector3d& to_light, double strength) {
+    if (normal_world.dot(to_light) <= 0.0) return;  // the light is behind the surface
+    const Eigen::Vector3d half = (to_light + to_eye_world).normalized();
+    const double cos_half = normal_world.dot(half);
+    if (cos_half > 0.0) specular += strength * std::pow(cos_half, kShininess);
+  };
+  if (glossy) highlight(key_direction_world_, key_strength_);
+  const LampGrid& lamps = scene_.lamps;
+  if (lamps.spacing_m > 0.0 && lamps.strength > 0.0) {
+    // The nearest lamps (nine, or three in a row). Each is a downlight: its intensity falls as
+    // cos^3 of the angle from straight down; the light reaching a surface follows the cosine law
+    // and the inverse square of the distance. The sum is divided by its mean over the floor
+    // below a row of lamps ((5 pi / 16) H / spacing for lamps H above it), so the lamps modulate
+    // the brightness around its usual level: pools under the lamps, darker stretches between.
+    const double spacing = lamps.spacing_m;
+    const double i0 = std::round((p_world.x() - lamps.origin_xy.x()) / spacing);
+    const double j0 =
+        lamps.single_row ? 0.0 : std::round((p_world.y() - lamps.origin_xy.y()) / spacing);
+    const int rows = lamps.single_row ? 0 : 1;
+    const double reference_m2 = lamps.height_m * lamps.height_m;
+    double diffuse = 0.0;
+    for (int di = -1; di <= 1; ++di) {
+      for (int dj = -rows; dj <= rows; ++dj) {
+        const Eigen::Vector3d lamp(lamps.origin_xy.x() + (i0 + di) * spacing,
+                                   lamps.origin_xy.y() + (j0 + dj) * spacing, lamps.height_m);
+        const Eigen::Vector3d to_lamp = lamp - p_world;
+        const double distance2 = std::max(to_lamp.squaredNorm(), 0.01);
+        const Eigen::Vector3d direction = to_lamp / std::sqrt(distance2);
+        const double cosine = normal_world.dot(direction);
+        const double emission = direction.z();  // cosine of the angle from straight down
+        if (cosine <= 0.0 || emission <= 0.0) continue;
+        diffuse += cosine * emission * emission * emission * reference_m2 / distance2;
+        if (glossy) highlight(direction, std::min(1.0, reference_m2 / distance2));
+      }
+    }
+    const double mean_floor_light = (5.0 * M_PI / 16.0) * lamps.height_m / spacing;
+    light.diffuse = static_cast<float>(std::min(diffuse / mean_floor_light, 2.0));
+  }
+  light.specular = static_cast<float>(specular);
+  return light;
 }
 
 void Renderer::render(const SE3& T_world_camera, RenderOutput& out) const {
@@ -172,6 +223,9 @@ void Renderer::render(const SE3& T_world_camera, RenderOutput& out) const {
   }
 
   // Pass 2: exact depth, incidence and colour of the visible surface per pixel.
+  const bool has_lamps = scene_.lamps.spacing_m > 0.0 && scene_.lamps.strength > 0.0;
+  const auto lamp_share = has_lamps ? static_cast<float>(scene_.lamps.strength) : 0.0f;
+  const Eigen::Vector3d camera_world = T_world_camera.translation();
   const float nan = std::numeric_limits<float>::quiet_NaN();
   for (int r = 0; r < height; ++r) {
     const double ray_y = (r - cy) / fy;
@@ -208,10 +262,19 @@ void Renderer::render(const SE3& T_world_camera, RenderOutput& out) const {
       const double texels_per_pixel = footprint_m * rect.max_texels_per_m;
       const int level = texels_per_pixel > 1.0 ? std::ilogb(texels_per_pixel) : 0;
       const cv::Vec3f texel = texture.sample(x_texel, y_texel, level, world.wrap_texture);
-      const float shade = shade_[static_cast<std::size_t>(id)];
-      color_row[c] = cv::Vec3b(cv::saturate_cast<std::uint8_t>(texel[0] * shade),
-                               cv::saturate_cast<std::uint8_t>(texel[1] * shade),
-                               cv::saturate_cast<std::uint8_t>(texel[2] * shade));
+      float shade = shade_[static_cast<std::size_t>(id)];
+      float highlight = 0.0f;
+      const bool glossy = world.gloss > 0.0;
+      if (has_lamps || glossy) {
+        const Eigen::Vector3d p_world = T_world_camera * p;
+        const Eigen::Vector3d to_eye = (camera_world - p_world).normalized();
+        const PointLight light = lightAt(p_world, world.normal(), to_eye, glossy);
+        shade *= (1.0f - lamp_share) + lamp_share * light.diffuse;
+        highlight = static_cast<float>(kHighlightLevels * world.gloss) * light.specular;
+      }
+      color_row[c] = cv::Vec3b(cv::saturate_cast<std::uint8_t>(texel[0] * shade + highlight),
+                               cv::saturate_cast<std::uint8_t>(texel[1] * shade + highlight),
+                               cv::saturate_cast<std::uint8_t>(texel[2] * shade + highlight));
     }
   }
 }

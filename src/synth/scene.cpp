@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
+#include <utility>
 
 #include "random.hpp"
 #include "slamd/common/config.hpp"
@@ -17,7 +18,9 @@ constexpr double kWallTexelM = 0.02;  ///< wall, floor and ceiling texture resol
 class SceneBuilder {
  public:
   SceneBuilder(const std::string& name, const SceneParams& params, std::uint64_t seed)
-      : params_(params), rng_(deriveSeed(seed, 0x5CE4E, 0)) {
+      : params_(params),
+        rng_(deriveSeed(seed, 0x5CE4E, 0)),
+        variety_rng_(deriveSeed(seed, 0x5CE4E, 1)) {
     scene_.name = name;
   }
 
@@ -36,6 +39,13 @@ class SceneBuilder {
   void facingRect(const Eigen::Vector3d& center, const Eigen::Vector3d& normal,
                   const Eigen::Vector3d& up, double width_m, double height_m, int texture,
                   double texel_m) {
+    facingRect(center, normal, up, width_m, height_m, texture, texel_m, rng_);
+  }
+
+  /// facingRect drawing its texture offset from `rng`.
+  void facingRect(const Eigen::Vector3d& center, const Eigen::Vector3d& normal,
+                  const Eigen::Vector3d& up, double width_m, double height_m, int texture,
+                  double texel_m, Rng& rng) {
     const Eigen::Vector3d look = -normal.normalized();
     const Eigen::Vector3d right = look.cross(up).normalized();
     const Eigen::Vector3d down = look.cross(right);
@@ -49,7 +59,7 @@ class SceneBuilder {
       rect.wrap_texture = true;
       rect.texels_per_m_u = rect.texels_per_m_v = 1.0 / texel_m;
       rect.texel_offset =
-          Eigen::Vector2d(std::floor(rng_.uniform(0.0, size)), std::floor(rng_.uniform(0.0, size)));
+          Eigen::Vector2d(std::floor(rng.uniform(0.0, size)), std::floor(rng.uniform(0.0, size)));
     } else {
       rect.wrap_texture = false;
       rect.texels_per_m_u = size / width_m;
@@ -82,12 +92,71 @@ class SceneBuilder {
     if (obstacle) scene_.obstacles.emplace_back(min_m, max_m);
   }
 
-  /// A vertical wall from a to b (floor-level x, y), facing `normal_xy`.
+  /// A vertical wall from a to b (floor-level x, y), facing `normal_xy`, painted with the
+  /// scene's gloss.
   void wall(const Eigen::Vector2d& a, const Eigen::Vector2d& b, const Eigen::Vector2d& normal_xy,
             double height_m, int texture) {
     const Eigen::Vector2d mid = 0.5 * (a + b);
     facingRect({mid.x(), mid.y(), 0.5 * height_m}, {normal_xy.x(), normal_xy.y(), 0.0},
                Eigen::Vector3d::UnitZ(), (b - a).norm(), height_m, texture, kWallTexelM);
+    scene_.rects.back().gloss = params_.gloss;
+  }
+
+  /// A corridor floor's texture and its texel size (metres): the classic worn tiles, or a regular
+  /// tiling when params.floor_tile_m > 0.
+  std::pair<int, double> corridorFloorTexture(double density) {
+    if (params_.floor_tile_m <= 0.0) {
+      return {addTexture(TextureKind::kFloorTiles, density, 512), kWallTexelM};
+    }
+    TileStyle style;
+    style.tiles_per_side = 16;
+    style.contrast = params_.floor_tile_contrast;
+    style.variation = params_.floor_tile_variation;
+    style.base_luma = variety_rng_.uniform(95.0, 165.0);
+    // One draw from the main stream, as for the classic floor: the rest of the scene stays put.
+    scene_.textures.push_back(Texture::tiles(style, rng_.nextU64(), 256));
+    return {static_cast<int>(scene_.textures.size()) - 1, params_.floor_tile_m / 16.0};
+  }
+
+  /// A floor centred at (x, y), `width_m` across x and `length_m` along it, with the scene's gloss.
+  void floor(double center_x, double center_y, double width_m, double length_m,
+             std::pair<int, double> texture_and_texel_m) {
+    facingRect({center_x, center_y, 0.0}, Eigen::Vector3d::UnitZ(), Eigen::Vector3d::UnitX(),
+               width_m, length_m, texture_and_texel_m.first, texture_and_texel_m.second);
+    scene_.rects.back().gloss = params_.gloss;
+  }
+
+  /// A tiled dado band along the wall a-b (none when params.wall_tile_height_m is 0); all walls
+  /// of a scene share one tile texture.
+  void dado(const Eigen::Vector2d& a, const Eigen::Vector2d& b, const Eigen::Vector2d& normal_xy) {
+    const double height = params_.wall_tile_height_m;
+    if (height <= 0.0) return;
+    if (dado_texture_ < 0) {
+      TileStyle style;
+      style.tiles_per_side = 16;
+      style.contrast = params_.wall_tile_contrast;
+      style.grout_contrast = 0.3;
+      style.base_luma = variety_rng_.uniform(120.0, 210.0);
+      scene_.textures.push_back(Texture::tiles(style, variety_rng_.nextU64(), 256));
+      dado_texture_ = static_cast<int>(scene_.textures.size()) - 1;
+    }
+    // 2 mm off the wall: in front of the paint, behind skirting boards, doors and posters. Its
+    // draws come from the variety stream, so the rest of the scene is the same with or without.
+    const Eigen::Vector2d center = 0.5 * (a + b) + normal_xy * 0.002;
+    facingRect({center.x(), center.y(), 0.5 * height}, {normal_xy.x(), normal_xy.y(), 0.0},
+               Eigen::Vector3d::UnitZ(), (b - a).norm(), height, dado_texture_,
+               params_.wall_tile_m / 16.0, variety_rng_);
+    scene_.rects.back().gloss = std::max(params_.gloss, 0.3);  // glazed tiles
+  }
+
+  /// Ceiling lamps at the scene's spacing, with one lamp at (x, y); single_row: only along x.
+  void lamps(double x, double y, double ceiling_height_m, bool single_row) {
+    if (params_.lamp_spacing_m <= 0.0) return;
+    scene_.lamps.single_row = single_row;
+    scene_.lamps.spacing_m = params_.lamp_spacing_m;
+    scene_.lamps.origin_xy = Eigen::Vector2d(x, y);
+    scene_.lamps.height_m = ceiling_height_m - 0.05;
+    scene_.lamps.strength = params_.lamp_strength;
   }
 
   /// A flat item on a wall (poster, door, frame): centred `along_m` metres from a on the wall a-b
@@ -139,7 +208,9 @@ class SceneBuilder {
  private:
   SceneParams params_;
   Rng rng_;
+  Rng variety_rng_;  ///< draws of the variety features (tiles, dado), apart from the layout's
   Scene scene_;
+  int dado_texture_ = -1;
 };
 
 Eigen::Vector2d v2(double x, double y) { return {x, y}; }
@@ -166,21 +237,40 @@ bool Scene::isFree(const Eigen::Vector3d& p_world, double margin_m) const {
 
 const ConfigSchema<SceneParams>& SceneParams::schema() {
   using C = SceneParams;
-  static const auto table = ConfigSchema<C>("synthetic")
-                                .number("texture_density", &C::texture_density, 0.0, 1.0, "",
-                                        "0 = nearly featureless walls .. 1 = rich marks")
-                                .flag("doors", &C::doors, "doors along corridor walls")
-                                .flag("posters", &C::posters, "posters on walls")
-                                .number("corridor_length_m", &C::corridor_length_m, 8.0, 200.0, "m",
-                                        "length of the corridor scene")
-                                .number("corridor_width_m", &C::corridor_width_m, 1.4, 6.0, "m",
-                                        "width of the corridor scene")
-                                .number("corridor_height_m", &C::corridor_height_m, 2.0, 5.0, "m",
-                                        "height of the corridor scene")
-                                .number("loop_length_m", &C::loop_length_m, 8.0, 100.0, "m",
-                                        "outer x extent of the ring corridor")
-                                .number("loop_width_m", &C::loop_width_m, 8.0, 100.0, "m",
-                                        "outer y extent of the ring corridor");
+  static const auto table =
+      ConfigSchema<C>("synthetic")
+          .number("texture_density", &C::texture_density, 0.0, 1.0, "",
+                  "0 = nearly featureless walls .. 1 = rich marks")
+          .flag("doors", &C::doors, "doors along corridor walls")
+          .flag("posters", &C::posters, "posters on walls")
+          .number("corridor_length_m", &C::corridor_length_m, 8.0, 200.0, "m",
+                  "length of the corridor scene")
+          .number("corridor_width_m", &C::corridor_width_m, 1.4, 6.0, "m",
+                  "width of the corridor scene")
+          .number("corridor_height_m", &C::corridor_height_m, 2.0, 5.0, "m",
+                  "height of the corridor scene")
+          .number("loop_length_m", &C::loop_length_m, 8.0, 100.0, "m",
+                  "outer x extent of the ring corridor")
+          .number("loop_width_m", &C::loop_width_m, 8.0, 100.0, "m",
+                  "outer y extent of the ring corridor")
+          .number("floor_tile_m", &C::floor_tile_m, 0.0, 2.0, "m",
+                  "corridor floors: period of a regular tiling; 0 = worn "
+                  "classic tiles")
+          .number("floor_tile_contrast", &C::floor_tile_contrast, 0.0, 1.0, "",
+                  "luma step between alternating floor tiles")
+          .number("floor_tile_variation", &C::floor_tile_variation, 0.0, 1.0, "",
+                  "per-tile random shade; 0 = identical tiles")
+          .number("wall_tile_height_m", &C::wall_tile_height_m, 0.0, 2.0, "m",
+                  "corridor walls: height of a tiled dado; 0 = none")
+          .number("wall_tile_m", &C::wall_tile_m, 0.05, 1.0, "m", "period of the wall tiles")
+          .number("wall_tile_contrast", &C::wall_tile_contrast, 0.0, 1.0, "",
+                  "luma step between alternating wall tiles")
+          .number("gloss", &C::gloss, 0.0, 1.0, "",
+                  "specular strength of walls and floors; 0 = matte")
+          .number("lamp_spacing_m", &C::lamp_spacing_m, 0.0, 20.0, "m",
+                  "ceiling lamps on a grid of this spacing; 0 = none")
+          .number("lamp_strength", &C::lamp_strength, 0.0, 1.0, "",
+                  "how strongly lamps modulate the brightness");
   return table;
 }
 
@@ -214,21 +304,23 @@ Scene makeCorridor(const SceneParams& params, std::uint64_t seed) {
   const int right_texture =
       builder.addTexture(TextureKind::kPlaster, density, params.wall_texture_px);
   const int end_texture = builder.addTexture(TextureKind::kPlaster, std::max(density, 0.3), 512);
-  const int floor_texture = builder.addTexture(TextureKind::kFloorTiles, density, 512);
+  const auto floor_texture = builder.corridorFloorTexture(density);
   const int ceiling_texture = builder.addTexture(TextureKind::kCeilingTiles, density, 512);
   const int door_texture = builder.addTexture(TextureKind::kWoodDoor, density, 512);
   const int frame_texture = builder.addTexture(TextureKind::kMetal, 0.0, 256);
   const int skirting_texture = builder.addTexture(TextureKind::kWood, 0.0, 256);
   const Eigen::Vector3d z = Eigen::Vector3d::UnitZ();
   const Eigen::Vector3d x = Eigen::Vector3d::UnitX();
-  builder.facingRect({0.5 * length, 0.0, 0.0}, z, x, 2.0 * half, length, floor_texture,
-                     kWallTexelM);
+  builder.floor(0.5 * length, 0.0, 2.0 * half, length, floor_texture);
   builder.facingRect({0.5 * length, 0.0, height}, -z, x, 2.0 * half, length, ceiling_texture,
                      kWallTexelM);
   builder.wall(v2(0, half), v2(length, half), v2(0, -1), height, left_texture);
   builder.wall(v2(0, -half), v2(length, -half), v2(0, 1), height, right_texture);
   builder.wall(v2(0, -half), v2(0, half), v2(1, 0), height, end_texture);
   builder.wall(v2(length, -half), v2(length, half), v2(-1, 0), height, end_texture);
+  builder.dado(v2(0, half), v2(length, half), v2(0, -1));
+  builder.dado(v2(0, -half), v2(length, -half), v2(0, 1));
+  builder.lamps(0.5 * params.lamp_spacing_m, 0.0, height, true);
   builder.decorateCorridorWall(v2(0, half), v2(length, half), v2(0, -1), door_texture,
                                frame_texture, skirting_texture);
   builder.decorateCorridorWall(v2(0, -half), v2(length, -half), v2(0, 1), door_texture,
@@ -262,14 +354,14 @@ Scene makeCorridorLoop(const SceneParams& params, std::uint64_t seed) {
     wall_textures.push_back(
         builder.addTexture(TextureKind::kPlaster, density, params.wall_texture_px / 2));
   }
-  const int floor_texture = builder.addTexture(TextureKind::kFloorTiles, density, 512);
+  const auto floor_texture = builder.corridorFloorTexture(density);
   const int ceiling_texture = builder.addTexture(TextureKind::kCeilingTiles, density, 512);
   const int door_texture = builder.addTexture(TextureKind::kWoodDoor, density, 512);
   const int frame_texture = builder.addTexture(TextureKind::kMetal, 0.0, 256);
   const int skirting_texture = builder.addTexture(TextureKind::kWood, 0.0, 256);
   const Eigen::Vector3d z = Eigen::Vector3d::UnitZ();
   const Eigen::Vector3d x = Eigen::Vector3d::UnitX();
-  builder.facingRect({0.5 * a, 0.5 * b, 0.0}, z, x, b, a, floor_texture, kWallTexelM);
+  builder.floor(0.5 * a, 0.5 * b, b, a, floor_texture);
   builder.facingRect({0.5 * a, 0.5 * b, height}, -z, x, b, a, ceiling_texture, kWallTexelM);
   struct WallSpec {
     Eigen::Vector2d from, to, normal;
@@ -288,7 +380,9 @@ Scene makeCorridorLoop(const SceneParams& params, std::uint64_t seed) {
   };
   for (std::size_t i = 0; i < walls.size(); ++i) {
     builder.wall(walls[i].from, walls[i].to, walls[i].normal, height, wall_textures[i]);
+    builder.dado(walls[i].from, walls[i].to, walls[i].normal);
   }
+  builder.lamps(0.5 * w, 0.5 * w, height, false);
   for (const auto& spec : walls) {
     builder.decorateCorridorWall(spec.from, spec.to, spec.normal, door_texture, frame_texture,
                                  skirting_texture);

@@ -10,6 +10,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "slamd/common/config.hpp"
+#include "slamd/synth/variety.hpp"
 
 namespace slamd {
 
@@ -34,6 +35,10 @@ const ConfigSchema<SyntheticConfig>& SyntheticConfig::schema() {
                   "0 = natural length of the trajectory")
           .number("seed", &C::seed, 0, INT_MAX, "", "scene, motion and sensor noise seed")
           .number("start_time_s", &C::start_time_s, 0.0, 4.0e9, "s", "first frame's timestamp")
+          .flag("variety", &C::variety,
+                "draw the world's look and the walk from the seed (evaluation worlds); replaces "
+                "the configured corridor_width_m, texture_density, doors, posters, floor/wall "
+                "tiles, gloss, lamps, walk speed, zigzag, look-around and exposure variation")
           .number("blackout_start_s", &C::blackout_start_s, 0.0, 1.0e6, "s",
                   "from the first frame: frames from here on come out covered (black, no depth)")
           .number("blackout_duration_s", &C::blackout_duration_s, 0.0, 1.0e6, "s",
@@ -48,6 +53,9 @@ SyntheticConfig SyntheticConfig::load(Config& config) {
   out.motion = synth::MotionParams::load(config);
   out.sensor = synth::SensorParams::load(config);
   out.camera = CameraConfig::load(config, 5000.0);
+  if (out.variety) {
+    out.variety_drawn = synth::applyVariety(out.seed, out.scene, out.motion, out.sensor);
+  }
   if (out.camera.intrinsics.distortion_model != DistortionModel::kNone) {
     throw ConfigError(
         "camera.distortion_model = plumb_bob: synthetic worlds render an ideal pinhole camera "
@@ -86,6 +94,7 @@ std::string SyntheticSource::description() const {
   std::ostringstream out;
   out << "synthetic:" << scene_name_ << " (" << synth::motionKindName(motion_->kind()) << ", "
       << frame_count_ << " frames, seed " << config_.seed << ")";
+  if (config_.variety) out << " variety: " << config_.variety_drawn;
   return out.str();
 }
 

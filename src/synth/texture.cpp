@@ -327,6 +327,46 @@ Texture Texture::generate(TextureKind kind, double density, std::uint64_t seed, 
   return fromImage(image);
 }
 
+Texture Texture::tiles(const TileStyle& style, std::uint64_t seed, int size_px) {
+  if (!isPowerOfTwo(size_px) || size_px < 16 || size_px > 2048) {
+    throw std::invalid_argument("texture size " + std::to_string(size_px) +
+                                " px must be a power of two in [16, 2048]");
+  }
+  if (style.tiles_per_side < 1 || size_px % style.tiles_per_side != 0 ||
+      size_px / style.tiles_per_side < 4) {
+    throw std::invalid_argument("tiles_per_side " + std::to_string(style.tiles_per_side) +
+                                " must divide the texture size " + std::to_string(size_px) +
+                                " into tiles of at least 4 px");
+  }
+  const auto in_unit = [](double value) { return value >= 0.0 && value <= 1.0; };
+  if (!in_unit(style.contrast) || !in_unit(style.grout_contrast) || !in_unit(style.variation) ||
+      !(style.base_luma >= 0.0 && style.base_luma <= 255.0)) {
+    throw std::invalid_argument(
+        "tile style: contrast, grout_contrast and variation must be in "
+        "[0, 1], base_luma in [0, 255]");
+  }
+  Rng rng(seed);
+  const int tile = size_px / style.tiles_per_side;
+  // A slight tint, the same for every tile: the pattern stays exactly periodic.
+  const cv::Scalar tint(rng.uniform(-12.0, 12.0), rng.uniform(-6.0, 6.0), rng.uniform(-12.0, 12.0));
+  const double half_step = 0.5 * 255.0 * style.contrast;
+  cv::Mat image(size_px, size_px, CV_8UC3);
+  for (int ty = 0; ty < style.tiles_per_side; ++ty) {
+    for (int tx = 0; tx < style.tiles_per_side; ++tx) {
+      const double checker = ((tx + ty) % 2 == 0) ? half_step : -half_step;
+      const double luma = style.base_luma + checker + 12.0 * style.variation * rng.uniform(-1, 1);
+      image(cv::Rect(tx * tile, ty * tile, tile, tile)).setTo(cv::Scalar::all(luma) + tint);
+    }
+  }
+  const cv::Scalar grout = (cv::Scalar::all(style.base_luma) + tint) * (1.0 - style.grout_contrast);
+  const int grout_px = std::max(1, tile / 16);
+  for (int k = 0; k < style.tiles_per_side; ++k) {
+    image(cv::Rect(k * tile, 0, grout_px, size_px)).setTo(grout);
+    image(cv::Rect(0, k * tile, size_px, grout_px)).setTo(grout);
+  }
+  return fromImage(image);
+}
+
 Texture Texture::fromImage(const cv::Mat& image_bgr) {
   if (image_bgr.type() != CV_8UC3 || image_bgr.cols != image_bgr.rows ||
       !isPowerOfTwo(image_bgr.cols)) {

@@ -51,6 +51,10 @@ struct MotionParams {
   double zigzag_period_s = 4.0;     ///< one full left-right-left cycle
   double step_hz = 1.8;             ///< walking step frequency (head bob)
   double head_bob_m = 0.02;         ///< vertical bob amplitude
+  /// The walker looks left and right while walking: a yaw oscillation of this amplitude (degrees)
+  /// at look_around_hz, on top of the zigzag's heading. 0 = looks ahead.
+  double look_around_deg = 0.0;
+  double look_around_hz = 0.3;
   double robot_speed_mps = 0.4;
   double robot_height_m = 0.5;          ///< camera height of the robot
   double max_speed_mps = 0.35;          ///< peak speed of the random motion

@@ -17,7 +17,10 @@
 // depth buffer. A second pass shades only the visible surface of each pixel: bilinear texture
 // lookup in the mip level matching the pixel footprint, times Lambertian lighting (ambient plus
 // two directional lights; Lambert's cosine law, which for planar faces and directional lights is
-// constant per face). No noise: sensor effects are SensorModel's job.
+// constant per face). Scenes with ceiling lamps (Scene::lamps) add per-pixel light from the nine
+// nearest lamps (cosine law, inverse-square falloff); glossy surfaces (SurfaceRect::gloss) add
+// white Blinn-Phong highlights of the key light and the lamps, which move with the viewpoint.
+// No noise: sensor effects are SensorModel's job.
 //
 // Thread-safety: render() is const and touches only its output; one Renderer may serve several
 // threads with separate outputs, but slamd calls it from one thread.
@@ -64,9 +67,19 @@ class Renderer {
   static constexpr double kNearPlaneM = 0.02;
 
  private:
+  /// Lamp light and highlights at a visible point (world frame), see the file comment.
+  struct PointLight {
+    float diffuse = 1.0f;   ///< lamp light relative to its mean on the floor, 0..2
+    float specular = 0.0f;  ///< highlight intensity, 0..~1, before the surface's gloss
+  };
+  PointLight lightAt(const Eigen::Vector3d& p_world, const Eigen::Vector3d& normal_world,
+                     const Eigen::Vector3d& to_eye_world, bool glossy) const;
+
   const Scene& scene_;
   CameraIntrinsics intrinsics_;
-  std::vector<float> shade_;  ///< Lambertian factor per rectangle
+  std::vector<float> shade_;  ///< Lambertian factor per rectangle (directional lights)
+  Eigen::Vector3d key_direction_world_;
+  double key_strength_ = 0.0;
 };
 
 }  // namespace slamd::synth

@@ -39,6 +39,9 @@ struct SurfaceRect {
   double texels_per_m_u = 50.0;  ///< texture resolution along edge_u
   double texels_per_m_v = 50.0;  ///< texture resolution along edge_v
   Eigen::Vector2d texel_offset = Eigen::Vector2d::Zero();  ///< texel at the origin corner
+  /// Specular reflectance of glossy paint or polished tiles: 0 = matte .. 1 = strong highlights
+  /// (Blinn-Phong, white, moving with the viewpoint).
+  double gloss = 0.0;
 
   /// Unit normal on the visible side.
   Eigen::Vector3d normal() const { return edge_v_world.cross(edge_u_world).normalized(); }
@@ -57,6 +60,21 @@ struct SceneParams {
   double loop_length_m = 16.0;  ///< outer x extent of the ring corridor
   double loop_width_m = 10.0;   ///< outer y extent of the ring corridor
   int wall_texture_px = 1024;   ///< wall texture side (power of two), 2 cm per texel
+  /// Corridor floors: 0 keeps the classic worn tiles; > 0 lays a regular tiling of this period
+  /// (metres), identical tiles in a checker of floor_tile_contrast, the repeating pattern that
+  /// fools descriptor matching.
+  double floor_tile_m = 0.0;
+  double floor_tile_contrast = 0.2;   ///< luma step between alternating tiles, 0..1
+  double floor_tile_variation = 0.0;  ///< per-tile random shade, 0 = identical tiles
+  /// Corridor walls: a tiled dado band from the floor up to this height (metres), 0 = none.
+  double wall_tile_height_m = 0.0;
+  double wall_tile_m = 0.15;        ///< period of the wall tiles, metres
+  double wall_tile_contrast = 0.1;  ///< luma step between alternating wall tiles, 0..1
+  double gloss = 0.0;               ///< specular strength of walls and floor, 0 = matte paint
+  /// Ceiling lamps on a square grid of this spacing (metres), 0 = none: pools of light and
+  /// darker stretches between them, and highlights on glossy surfaces.
+  double lamp_spacing_m = 0.0;
+  double lamp_strength = 0.5;  ///< how strongly lamps modulate the brightness, 0..1
 
   /// The scene's `synthetic.*` keys (rows in scene.cpp).
   static const ConfigSchema<SceneParams>& schema();
@@ -79,6 +97,16 @@ struct NavigationHints {
   double lateral_clearance_m = 0.4;
 };
 
+/// Point lamps at the nodes of a horizontal grid under the ceiling (or along one row in x).
+struct LampGrid {
+  double spacing_m = 0.0;                               ///< 0 = no lamps
+  Eigen::Vector2d origin_xy = Eigen::Vector2d::Zero();  ///< one lamp's x, y (metres)
+  double height_m = 2.5;                                ///< lamp height (metres)
+  bool single_row = false;  ///< one row along x through origin_xy (corridors)
+  /// How strongly the lamps modulate the brightness: 0 = even light .. 1 = dark between lamps.
+  double strength = 0.0;
+};
+
 struct Scene {
   std::string name;
   std::vector<Texture> textures;
@@ -88,6 +116,7 @@ struct Scene {
   /// The enclosing free volume (walls, floor, ceiling), metres.
   Eigen::AlignedBox3d bounds;
   NavigationHints navigation;
+  LampGrid lamps;  ///< ceiling lamps (spacing 0: none)
 
   /// True when p lies inside the bounds and at least margin_m from every wall, floor, ceiling and
   /// obstacle.

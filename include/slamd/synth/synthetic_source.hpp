@@ -15,6 +15,8 @@
 //                          corridor_loop: loop, room: random)
 //   synthetic.frames       frame count, 0 = the trajectory's natural length (see motion.hpp)
 //   synthetic.seed         0..2^31-1: scene textures, layout, motion jitter and sensor noise
+//   synthetic.variety      true: draw the look of the world and the walk from the seed too
+//                          (synth/variety.hpp); the drawn values replace configured ones
 //   synthetic.start_time_s timestamp of frame 0, seconds since the Unix epoch   1.6e9
 //   synthetic.texture_density, doors, posters, corridor_*, loop_*   see SceneParams
 //   synthetic.rate_hz, walk_speed_mps, zigzag_*, robot_*, ...       see MotionParams
@@ -49,6 +51,8 @@ struct SyntheticConfig {
   int frames = 0;                   ///< 0 = natural length of the trajectory
   std::uint64_t seed = 42;
   double start_time_s = 1.6e9;
+  bool variety = false;       ///< draw scene, walk and exposure from the seed (variety.hpp)
+  std::string variety_drawn;  ///< what the draw chose (set by load), for logs and reports
   /// Frames in [start, start + duration) come out covered, as if a hand or a passer-by blocked
   /// the lens: black colour, no depth (ground truth still lists them), for testing tracking loss
   /// and relocalisation.

@@ -32,9 +32,22 @@ enum class TextureKind {
   kFabric,        ///< upholstery
 };
 
+/// A regular tiling: identical (or nearly identical) tiles in one or two alternating colours,
+/// the repeating pattern of corridor floors and tiled walls that fools descriptor matching.
+struct TileStyle {
+  int tiles_per_side = 16;      ///< tiles along each side of the texture (divides its size)
+  double contrast = 0.2;        ///< luma difference of alternating (checker) tiles, 0..1 of 255
+  double grout_contrast = 0.4;  ///< how much darker the grout lines are, 0..1
+  double variation = 0.0;       ///< per-tile random shade, 0 = identical tiles .. 1 = +-12 levels
+  double base_luma = 150.0;     ///< mean tile brightness, 0..255
+};
+
 class Texture {
  public:
   Texture() = default;
+  /// A size_px x size_px regular tiling (see TileStyle); throws std::invalid_argument when
+  /// tiles_per_side does not divide size_px or a field is out of range.
+  static Texture tiles(const TileStyle& style, std::uint64_t seed, int size_px);
 
   /// A size_px x size_px texture (size a power of two, 16..2048).
   static Texture generate(TextureKind kind, double density, std::uint64_t seed, int size_px = 512);
