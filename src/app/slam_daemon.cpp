@@ -743,6 +743,15 @@ bool SlamDaemon::Impl::writeMetrics(const std::vector<StageStats>& stats) {
   if (backend) {
     json.key("backend").beginObject();
     json.key("keyframes").value(summary.keyframes);
+    // Keyframe rate against the distance and time of the estimated trajectory (issue 22: new
+    // keyframes come from novelty, not from every frame of a turn).
+    const double distance_m = pathLengthM(trajectory);
+    const double duration_s = durationS(trajectory);
+    json.key("distance_travelled_m").value(distance_m);
+    json.key("metres_per_keyframe")
+        .value(summary.keyframes > 0 ? distance_m / static_cast<double>(summary.keyframes) : 0.0);
+    json.key("keyframes_per_s")
+        .value(duration_s > 0 ? static_cast<double>(summary.keyframes) / duration_s : 0.0);
     json.key("culled_keyframes").value(summary.culled_keyframes);
     json.key("keyframe_bytes").value(summary.keyframe_bytes);
     json.key("bytes_per_keyframe")

@@ -92,4 +92,19 @@ void writeTumTrajectory(const std::string& path, const Trajectory& trajectory,
   if (!written) throw std::runtime_error("trajectory not written: " + error);
 }
 
+double pathLengthM(const Trajectory& trajectory) {
+  double length_m = 0.0;
+  for (std::size_t i = 1; i < trajectory.size(); ++i) {
+    length_m += (trajectory[i].T_world_camera.translation() -
+                 trajectory[i - 1].T_world_camera.translation())
+                    .norm();
+  }
+  return length_m;
+}
+
+double durationS(const Trajectory& trajectory) {
+  return trajectory.size() < 2 ? 0.0
+                               : trajectory.back().timestamp_s - trajectory.front().timestamp_s;
+}
+
 }  // namespace slamd

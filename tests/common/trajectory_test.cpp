@@ -34,6 +34,17 @@ TEST(Trajectory, MalformedLinesNameFileAndLine) {
   EXPECT_THROW(readTumTrajectory("/nonexistent/gt.txt"), std::runtime_error);
 }
 
+TEST(Trajectory, PathLengthSumsTheMovesAndDurationSpansTheStamps) {
+  const Trajectory trajectory = parseTumTrajectory(
+      "1.0 0 0 0 0 0 0 1\n"
+      "1.5 3 4 0 0 0 0.7071068 0.7071068\n"  // 5 m away; rotation does not count
+      "3.0 3 4 2 0 0 0 1\n");
+  EXPECT_NEAR(pathLengthM(trajectory), 7.0, 1e-12);
+  EXPECT_NEAR(durationS(trajectory), 2.0, 1e-12);
+  EXPECT_EQ(pathLengthM(Trajectory(trajectory.begin(), trajectory.begin() + 1)), 0.0);
+  EXPECT_EQ(durationS(Trajectory()), 0.0);
+}
+
 TEST(Trajectory, WriteThenReadRoundTrips) {
   Trajectory t;
   for (int i = 0; i < 10; ++i) {

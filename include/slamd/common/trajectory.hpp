@@ -34,6 +34,11 @@ Trajectory parseTumTrajectory(const std::string& text, const std::string& source
 void writeTumTrajectory(const std::string& path, const Trajectory& trajectory,
                         const std::string& header_comment = "");
 
+/// Distance travelled along the trajectory: the sum of the camera's moves between consecutive
+/// poses (metres).
+double pathLengthM(const Trajectory& trajectory);
+/// Time from the first to the last pose (seconds); 0 for fewer than two poses.
+double durationS(const Trajectory& trajectory);
 /// One TUM line (without newline) for a pose.
 std::string formatTumPose(const StampedPose& pose);
 
