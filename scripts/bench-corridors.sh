@@ -13,7 +13,8 @@
 # Seeds: 2001.. are the evaluation set (docs/evaluation.md); tuning happens on 1001.. only.
 # Environment: CORRIDOR_SEEDS ("2001 2002 ..."), CORRIDOR_WALKS ("zigzag robot"),
 # SLAMD_BENCH_OUT (out/bench; results go to its corridors/ folder), CORRIDOR_SETS (extra
-# --set assignments for every run, e.g. "tracking.frontend=fovis").
+# --set assignments for every run, e.g. "tracking.frontend=fovis"), CORRIDOR_REPORT_ONLY=1
+# (only rebuild the tables from the runs already in the output folder).
 # Writes corridors/results.json, corridors/results.md and per-run folders.
 set -euo pipefail
 BUILD_DIR=$(cd "${1:-build}" && pwd)
@@ -53,9 +54,11 @@ run_case() {  # NAME SEED WALK
     --json > "$dir/rpe_frame.json"
 }
 
-for seed in $SEEDS; do
-  for walk in $WALKS; do run_case "${walk}_$seed" "$seed" "$walk"; done
-done
+if [ "${CORRIDOR_REPORT_ONLY:-0}" != 1 ]; then
+  for seed in $SEEDS; do
+    for walk in $WALKS; do run_case "${walk}_$seed" "$seed" "$walk"; done
+  done
+fi
 
 python3 - "$OUT" $SEEDS -- $WALKS <<'EOF'
 import json, math, os, sys

@@ -107,10 +107,15 @@ const ConfigSchema<TrackingConfig>& TrackingConfig::schema() {
           .number("keyframe_min_overlap", &C::keyframe_min_overlap, 0.0, 1.0, "fraction",
                   "fraction of the keyframe's features with depth still tracked; below it the "
                   "current frame becomes a keyframe")
+          .number("keyframe_max_baseline_ratio", &C::keyframe_max_baseline_ratio, 0.001, 100.0, "",
+                  "farther from the keyframe than this times its median feature depth makes "
+                  "a new keyframe (parallax: near scenes change faster)")
           .number("keyframe_max_translation_m", &C::keyframe_max_translation_m, 0.001, 100, "m",
-                  "farther from the keyframe makes a new keyframe")
+                  "farther from the keyframe makes a new keyframe (a safety bound: novelty, the "
+                  "overlap and inlier rules, usually comes first)")
           .number("keyframe_max_rotation_deg", &C::keyframe_max_rotation_deg, 0.1, 180, "deg",
-                  "more rotation from the keyframe makes a new keyframe")
+                  "more rotation from the keyframe makes a new keyframe (a safety bound, as the "
+                  "distance)")
           .number("keyframe_window", &C::keyframe_window, 1, 1000, "keyframes",
                   "recent keyframes kept (about 3 MB each at 640x480); a due keyframe re-uses a "
                   "recent one near the current pose if it tracks well (1 = never re-use)")

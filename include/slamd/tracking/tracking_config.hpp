@@ -82,10 +82,16 @@ struct TrackingConfig {
   double fovis_clique_tolerance_m = 0.02;
 
   // --- Keyframes and failures -----------------------------------------------------------------
-  int keyframe_min_inliers = 100;
+  // A new keyframe comes from novelty: when fewer than keyframe_min_overlap of the keyframe's
+  // features (with depth) are still tracked, or fewer than keyframe_min_inliers. The baseline
+  // bounds (distance, as a fraction of the keyframe's median depth and absolute, and rotation)
+  // keep the keyframe's appearance a good predictor of the current view, without making a
+  // keyframe every few frames of a walk or a turn that still sees the same things.
+  int keyframe_min_inliers = 50;
   double keyframe_min_overlap = 0.4;
-  double keyframe_max_translation_m = 0.15;
-  double keyframe_max_rotation_deg = 10.0;
+  double keyframe_max_baseline_ratio = 0.12;  ///< distance / keyframe's median feature depth
+  double keyframe_max_translation_m = 0.5;
+  double keyframe_max_rotation_deg = 30.0;
   int keyframe_window = 30;
   int max_predicted_frames = 5;
   double failure_sigma_scale = 10.0;

@@ -61,6 +61,7 @@ struct Keyframe {
   CameraIntrinsics intrinsics;
   FeatureSet features;  ///< keypoints, descriptors, undistorted pixels, 3D points (camera frame)
   RgbdFramePtr frame;   ///< images (null when processFrame got a reference, not a pointer)
+  double median_depth_m = 0.0;  ///< median depth of the features with depth; 0 = none
 };
 using KeyframePtr = std::shared_ptr<const Keyframe>;
 
