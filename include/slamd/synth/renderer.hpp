@@ -17,9 +17,10 @@
 // depth buffer. A second pass shades only the visible surface of each pixel: bilinear texture
 // lookup in the mip level matching the pixel footprint, times Lambertian lighting (ambient plus
 // two directional lights; Lambert's cosine law, which for planar faces and directional lights is
-// constant per face). Scenes with ceiling lamps (Scene::lamps) add per-pixel light from the nine
-// nearest lamps (cosine law, inverse-square falloff); glossy surfaces (SurfaceRect::gloss) add
-// white Blinn-Phong highlights of the key light and the lamps, which move with the viewpoint.
+// constant per face). Scenes with ceiling lamps (Scene::lamps) modulate that light per pixel by
+// the nearest lamps (nine, or three in a row; downlights, cosine law, inverse-square falloff);
+// glossy surfaces (SurfaceRect::gloss) add white Blinn-Phong highlights of the key light and the
+// lamps, which move with the viewpoint.
 // No noise: sensor effects are SensorModel's job.
 //
 // Thread-safety: render() is const and touches only its output; one Renderer may serve several
