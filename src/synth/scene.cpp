@@ -12,6 +12,7 @@ namespace slamd::synth {
 namespace {
 
 constexpr double kWallTexelM = 0.02;  ///< wall, floor and ceiling texture resolution (2 cm)
+constexpr int kTilesPerTexture = 16;  ///< tiles along a side of a regular tiling's texture
 
 /// Builds a scene piece by piece; every random choice comes from one seeded stream, in a fixed
 /// order, so the scene depends only on (name, params, seed).
@@ -102,6 +103,13 @@ class SceneBuilder {
     scene_.rects.back().gloss = params_.gloss;
   }
 
+  /// A 256 px regular tiling of kTilesPerTexture tiles per side (16 px per tile); its index.
+  int addTileTexture(TileStyle style, std::uint64_t seed) {
+    style.tiles_per_side = kTilesPerTexture;
+    scene_.textures.push_back(Texture::tiles(style, seed, 256));
+    return static_cast<int>(scene_.textures.size()) - 1;
+  }
+
   /// A corridor floor's texture and its texel size (metres): the classic worn tiles, or a regular
   /// tiling when params.floor_tile_m > 0.
   std::pair<int, double> corridorFloorTexture(double density) {
@@ -109,13 +117,12 @@ class SceneBuilder {
       return {addTexture(TextureKind::kFloorTiles, density, 512), kWallTexelM};
     }
     TileStyle style;
-    style.tiles_per_side = 16;
     style.contrast = params_.floor_tile_contrast;
     style.variation = params_.floor_tile_variation;
     style.base_luma = variety_rng_.uniform(95.0, 165.0);
     // One draw from the main stream, as for the classic floor: the rest of the scene stays put.
-    scene_.textures.push_back(Texture::tiles(style, rng_.nextU64(), 256));
-    return {static_cast<int>(scene_.textures.size()) - 1, params_.floor_tile_m / 16.0};
+    const int texture = addTileTexture(style, rng_.nextU64());
+    return {texture, params_.floor_tile_m / kTilesPerTexture};
   }
 
   /// A floor centred at (x, y), `width_m` across x and `length_m` along it, with the scene's gloss.
@@ -133,19 +140,17 @@ class SceneBuilder {
     if (height <= 0.0) return;
     if (dado_texture_ < 0) {
       TileStyle style;
-      style.tiles_per_side = 16;
       style.contrast = params_.wall_tile_contrast;
       style.grout_contrast = 0.3;
       style.base_luma = variety_rng_.uniform(120.0, 210.0);
-      scene_.textures.push_back(Texture::tiles(style, variety_rng_.nextU64(), 256));
-      dado_texture_ = static_cast<int>(scene_.textures.size()) - 1;
+      dado_texture_ = addTileTexture(style, variety_rng_.nextU64());
     }
     // 2 mm off the wall: in front of the paint, behind skirting boards, doors and posters. Its
     // draws come from the variety stream, so the rest of the scene is the same with or without.
     const Eigen::Vector2d center = 0.5 * (a + b) + normal_xy * 0.002;
     facingRect({center.x(), center.y(), 0.5 * height}, {normal_xy.x(), normal_xy.y(), 0.0},
                Eigen::Vector3d::UnitZ(), (b - a).norm(), height, dado_texture_,
-               params_.wall_tile_m / 16.0, variety_rng_);
+               params_.wall_tile_m / kTilesPerTexture, variety_rng_);
     scene_.rects.back().gloss = std::max(params_.gloss, 0.3);  // glazed tiles
   }
 
