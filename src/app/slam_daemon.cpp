@@ -574,6 +574,7 @@ void SlamDaemon::Impl::summarize(const std::vector<StageStats>& stats,
   summary.poses_lost = tally.lost.load();
   summary.poses_not_initialized = tally.not_initialized.load();
   summary.implausible_estimates = steps->tracking->implausibleEstimates();
+  summary.dense_aligned_frames = steps->tracking->denseAlignedFrames();
   summary.longest_loss_s = tally.longest_loss_s;
   summary.tracking_lost_at_end = tally.loss_start_utime.load() >= 0;
   summary.capture_gaps = tally.capture_gaps;
@@ -634,8 +635,9 @@ void SlamDaemon::Impl::logTrackingSummary() const {
   std::ostringstream line;
   line.precision(2);
   line << std::fixed << "tracking: " << summary.poses_tracked << " of " << summary.poses_published
-       << " poses measured, " << summary.poses_predicted << " predicted, " << summary.poses_lost
-       << " lost, " << summary.poses_not_initialized << " before the first; longest loss "
+       << " poses measured (" << summary.dense_aligned_frames << " by dense alignment), "
+       << summary.poses_predicted << " predicted, " << summary.poses_lost << " lost, "
+       << summary.poses_not_initialized << " before the first; longest loss "
        << summary.longest_loss_s << " s";
   if (summary.poses_published == 0) {
     SLAMD_LOG_WARN(kLog) << "tracking: no pose was published";
@@ -718,6 +720,7 @@ bool SlamDaemon::Impl::writeMetrics(const std::vector<StageStats>& stats) {
   json.key("poses_predicted").value(static_cast<std::int64_t>(summary.poses_predicted));
   json.key("poses_lost").value(static_cast<std::int64_t>(summary.poses_lost));
   json.key("implausible_estimates").value(static_cast<std::int64_t>(summary.implausible_estimates));
+  json.key("dense_aligned_frames").value(static_cast<std::int64_t>(summary.dense_aligned_frames));
   json.key("longest_loss_s").value(summary.longest_loss_s);
   json.key("tracking_lost_at_end").value(summary.tracking_lost_at_end);
   json.key("capture_gaps").value(static_cast<std::int64_t>(summary.capture_gaps));

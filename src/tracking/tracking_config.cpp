@@ -123,7 +123,23 @@ const ConfigSchema<TrackingConfig>& TrackingConfig::schema() {
                   "consecutive failed frames bridged by constant-velocity prediction before LOST")
           .number("failure_sigma_scale", &C::failure_sigma_scale, 1.0, 1e6, "",
                   "covariance inflation of a predicted (failed) frame relative to the last good "
-                  "frame's");
+                  "frame's")
+          .flag("dense_fallback", &C::dense_fallback,
+                "when features cannot measure a frame, align it densely (photometric + "
+                "point-to-plane on every pixel, coarse to fine) to the last measured frame "
+                "before falling back to prediction")
+          .number("dense_levels", &C::dense_levels, 2, 6, "",
+                  "pyramid levels of dense alignment (each halves the resolution)")
+          .number("dense_finest_level", &C::dense_finest_level, 0, 5, "",
+                  "finest pyramid level aligned (0 = full resolution, 1 = half); < dense_levels")
+          .number("dense_min_gradient", &C::dense_min_gradient, 0.0, 255.0, "grey levels/px",
+                  "pixels with a weaker image gradient carry no photometric residual")
+          .number("dense_prior_sigma_mps", &C::dense_prior_sigma_mps, 0.001, 100.0, "m/s",
+                  "uncertainty of the constant-velocity prior's speed: the prior's translation "
+                  "sigma is this times the time since the reference frame. A direction the scene "
+                  "leaves free (along a plain corridor) keeps the prior and this uncertainty")
+          .number("dense_prior_sigma_degps", &C::dense_prior_sigma_degps, 0.01, 10000.0, "deg/s",
+                  "the same for the rotation rate");
   return table;
 }
 
@@ -131,6 +147,11 @@ TrackingConfig TrackingConfig::load(Config& config) {
   TrackingConfig c;
   schema().load(config, c);
   c.motion_limits = MotionLimits::load(config);
+  if (c.dense_finest_level >= c.dense_levels) {
+    throw ConfigError("tracking.dense_finest_level (" + std::to_string(c.dense_finest_level) +
+                      ") must be less than tracking.dense_levels (" +
+                      std::to_string(c.dense_levels) + ")");
+  }
   if (c.max_depth_m <= c.min_depth_m) {
     throw ConfigError("tracking.max_depth_m (" + std::to_string(c.max_depth_m) +
                       ") must be greater than tracking.min_depth_m (" +

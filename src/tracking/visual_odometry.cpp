@@ -14,19 +14,23 @@ constexpr double kGridCellPx = 16.0;
 constexpr int kSiftMaxDistance = 350;    // L2 between SIFT descriptors (norm about 512)
 constexpr double kLostCovariance = 1e2;  // metres^2 / radians^2: "unknown"
 
-double msSince(std::int64_t start_ns) {
-  return static_cast<double>(steadyNowNs() - start_ns) * 1e-6;
+/// True when at least a quarter of the image has depth (sampled every 8th pixel each way).
+bool hasDepthCoverage(const cv::Mat& depth_m) {
+  if (depth_m.empty() || depth_m.type() != CV_32FC1) return false;
+  int samples = 0;
+  int with_depth = 0;
+  for (int v = 4; v < depth_m.rows; v += 8) {
+    const float* row = depth_m.ptr<float>(v);
+    for (int u = 4; u < depth_m.cols; u += 8) {
+      ++samples;
+      with_depth += row[u] > 0.0F ? 1 : 0;  // false for NaN
+    }
+  }
+  return samples > 0 && 4 * with_depth >= samples;
 }
 
-double bilinear(const cv::Mat& img, double u, double v) {
-  const int x = static_cast<int>(std::floor(u));
-  const int y = static_cast<int>(std::floor(v));
-  const double ax = u - x;
-  const double ay = v - y;
-  const float* r0 = img.ptr<float>(y);
-  const float* r1 = img.ptr<float>(y + 1);
-  const double a00 = r0[x], a01 = r0[x + 1], a10 = r1[x], a11 = r1[x + 1];
-  return (1 - ay) * ((1 - ax) * a00 + ax * a01) + ay * ((1 - ax) * a10 + ax * a11);
+double msSince(std::int64_t start_ns) {
+  return static_cast<double>(steadyNowNs() - start_ns) * 1e-6;
 }
 
 RefinementOptions refinementOptions(const TrackingConfig& config) {
@@ -77,7 +81,10 @@ const char* odometryStatusName(OdometryStatus status) {
 struct VisualOdometry::CurrentFrame {
   std::shared_ptr<FeatureSet> features;
   CameraIntrinsics K;
+  cv::Mat gray;     ///< the frame's grey image (owned: a copy when the caller may reuse it)
   cv::Mat depth_m;  ///< the frame's depth (CV_32F metres, NaN = none)
+  Utime utime = 0;
+  std::shared_ptr<const DenseFrame> pyramid;  ///< dense alignment's pyramid, when built
   int grid_cols = 0;
   int grid_rows = 0;
   std::vector<std::vector<int>> grid;
@@ -110,8 +117,25 @@ struct VisualOdometry::TrackAttempt {
   std::vector<std::uint8_t> inliers;
 };
 
+namespace {
+
+DenseAlignmentOptions denseOptions(const TrackingConfig& config) {
+  DenseAlignmentOptions options;
+  options.levels = config.dense_levels;
+  options.finest_level = config.dense_finest_level;
+  options.min_gradient = config.dense_min_gradient;
+  options.min_depth_m = config.min_depth_m;
+  options.max_depth_m = config.max_depth_m;
+  options.depth_sigma_coeff = config.depth_sigma_coeff;
+  return options;
+}
+
+}  // namespace
+
 VisualOdometry::VisualOdometry(const TrackingConfig& config)
-    : config_(config), extractor_(makeFeatureExtractor(config)) {}
+    : config_(config),
+      extractor_(makeFeatureExtractor(config)),
+      dense_options_(denseOptions(config)) {}
 
 VisualOdometry::~VisualOdometry() = default;
 
@@ -128,6 +152,8 @@ void VisualOdometry::reset() {
   T_world_last_measured_ = SE3::Identity();
   last_measured_utime_ = 0;
   prev_small_.release();
+  covariance_keyframe_prev_ = Matrix6d::Zero();
+  dense_reference_ = DenseReference();
   ++segment_;
 }
 
@@ -534,7 +560,7 @@ SE3 VisualOdometry::alignRotation(const cv::Mat& small_curr, const CameraIntrins
       const double pu = K.fx * p.x() / p.z() + K.cx;
       const double pv = K.fy * p.y() / p.z() + K.cy;
       if (pu < 1 || pv < 1 || pu > small_curr.cols - 2 || pv > small_curr.rows - 2) continue;
-      g += s.J * (s.value - bilinear(prev_small_, pu, pv));
+      g += s.J * (s.value - sampleBilinear(prev_small_, pu, pv));
       ++used;
     }
     if (used < 100) break;
@@ -646,6 +672,7 @@ OdometryResult VisualOdometry::fail(OdometryResult res, OdometryStatus status,
     res.T_world_camera = normalizedSE3(T_world_prev_ * motion);
     const double s = config_.failure_sigma_scale;
     res.covariance = last_covariance_ * (s * s);
+    covariance_keyframe_prev_ = chainedCovariance(motion, res.covariance);
     state_ = TrackingState::kPredicted;
     res.tracking_state = state_;
   } else {
@@ -687,7 +714,10 @@ std::optional<OdometryStatus> VisualOdometry::prepareFrame(const RgbdFrame& fram
   // Features.
   const std::int64_t t0 = steadyNowNs();
   curr.K = K;
-  curr.depth_m = frame.depth_m;
+  curr.utime = frame.utime;
+  // Frames passed by reference may be reused by the caller: what is kept is copied.
+  const bool borrowed = !frame_ptr;
+  curr.depth_m = borrowed && config_.dense_fallback ? frame.depth_m.clone() : frame.depth_m;
   curr.features = std::make_shared<FeatureSet>();
   try {
     extractor_->extract(gray, *curr.features);
@@ -695,9 +725,9 @@ std::optional<OdometryStatus> VisualOdometry::prepareFrame(const RgbdFrame& fram
     *curr.features = FeatureSet();
   }
   attachGeometry(frame.depth_m, K, config_, *curr.features);
-  // Keyframes keep the image for patch alignment; frames passed by reference may be reused by
-  // the caller, so their image is copied.
+  // Keyframes keep the image for patch alignment (a copy when borrowed).
   curr.features->gray = frame_ptr && gray.data == frame.gray.data ? gray : gray.clone();
+  curr.gray = curr.features->gray;
   if (config_.patch_refinement) {
     if (config_.align_blur_sigma_px > 0.0) {
       cv::GaussianBlur(gray, curr.features->align_gray, cv::Size(), config_.align_blur_sigma_px);
@@ -749,8 +779,8 @@ OdometryResult VisualOdometry::startSegment(OdometryResult res, const CurrentFra
   state_ = TrackingState::kOk;
   failed_frames_ = 0;
   have_velocity_ = false;
-  T_world_last_measured_ = T_world_curr;
-  last_measured_utime_ = frame.utime;
+  covariance_keyframe_prev_ = Matrix6d::Zero();
+  rememberMeasuredFrame(curr, T_world_curr, frame.utime);
   return commit(std::move(res), curr.features, true, t_start);
 }
 
@@ -925,8 +955,17 @@ OdometryResult VisualOdometry::process(const RgbdFrame& frame, const RgbdFramePt
   CurrentFrame curr;
   cv::Mat small;
   if (const auto failure = prepareFrame(frame, frame_ptr, curr, small, res.stats)) {
-    if (curr.features) prev_small_ = small;  // the image was usable; its features too few
-    return fail(std::move(res), *failure, curr.features, t_start);
+    if (!curr.features || !keyframe_) {
+      if (curr.features) prev_small_ = small;
+      return fail(std::move(res), *failure, curr.features, t_start);
+    }
+    // The image is usable but its features are too few: dense alignment may still measure it.
+    const SE3 T_world_pred = T_world_prev_ * predictMotion(small, curr.K);
+    SE3 T_world_curr;
+    if (!measureDense(curr, T_world_pred, res, T_world_curr)) {
+      return fail(std::move(res), *failure, curr.features, t_start);
+    }
+    return acceptMeasurement(std::move(res), curr, frame, frame_ptr, T_world_curr, false, t_start);
   }
   if (!keyframe_) {
     prev_small_ = small;
@@ -945,7 +984,15 @@ OdometryResult VisualOdometry::process(const RgbdFrame& frame, const RgbdFramePt
   res.stats.time_matching_ms = attempt.time_matching_ms;
   res.stats.time_motion_ms = attempt.time_motion_ms;
   if (attempt.status != OdometryStatus::kOk) {
-    return fail(std::move(res), attempt.status, curr.features, t_start);
+    SE3 T_world_curr;
+    if (!measureDense(curr, T_world_pred, res, T_world_curr)) {
+      return fail(std::move(res), attempt.status, curr.features, t_start);
+    }
+    // Features exist but matched nothing: with enough of them, the frame is the new keyframe
+    // the following frames track against.
+    const bool new_keyframe = curr.features->num_with_depth >= config_.keyframe_min_inliers;
+    return acceptMeasurement(std::move(res), curr, frame, frame_ptr, T_world_curr, new_keyframe,
+                             t_start);
   }
 
   res.status = OdometryStatus::kOk;
@@ -970,19 +1017,109 @@ OdometryResult VisualOdometry::process(const RgbdFrame& frame, const RgbdFramePt
     ++res.stats.implausible_estimates;
     return fail(std::move(res), OdometryStatus::kImplausibleMotion, curr.features, t_start);
   }
-  if (new_keyframe) addKeyframe(curr, frame, frame_ptr, T_world_curr, res);
+  return acceptMeasurement(std::move(res), curr, frame, frame_ptr, T_world_curr, new_keyframe,
+                           t_start);
+}
 
+OdometryResult VisualOdometry::acceptMeasurement(OdometryResult res, const CurrentFrame& curr,
+                                                 const RgbdFrame& frame,
+                                                 const RgbdFramePtr& frame_ptr,
+                                                 const SE3& T_world_curr, bool new_keyframe,
+                                                 std::int64_t t_start) {
   res.T_world_camera = T_world_curr;
   res.T_prev_curr = normalizedSE3(T_world_prev_.inverse() * T_world_curr);
   res.segment = segment_;
+  if (res.reference_keyframe_id == keyframe_->id) {
+    covariance_keyframe_prev_ = res.covariance_ref_curr;
+  } else {
+    covariance_keyframe_prev_ = chainedCovariance(res.T_prev_curr, res.covariance);
+    if (new_keyframe) {
+      // The back end's edge from the previous keyframe: the chain of measurements since it.
+      res.reference_keyframe_id = keyframe_->id;
+      res.ref_utime = keyframe_->utime;
+      res.T_ref_curr = normalizedSE3(keyframe_->T_world_camera.inverse() * T_world_curr);
+      res.covariance_ref_curr = covariance_keyframe_prev_;
+    }
+  }
+  if (new_keyframe) {
+    addKeyframe(curr, frame, frame_ptr, T_world_curr, res);
+    covariance_keyframe_prev_ = Matrix6d::Zero();
+  }
   velocity_prev_curr_ = res.T_prev_curr;
   have_velocity_ = true;
-  last_covariance_ = attempt.covariance;
+  last_covariance_ = res.covariance;
   failed_frames_ = 0;
   state_ = TrackingState::kOk;
-  T_world_last_measured_ = T_world_curr;
-  last_measured_utime_ = frame.utime;
+  rememberMeasuredFrame(curr, T_world_curr, frame.utime);
   return commit(std::move(res), curr.features, true, t_start);
+}
+
+void VisualOdometry::rememberMeasuredFrame(const CurrentFrame& curr, const SE3& T_world_curr,
+                                           Utime utime) {
+  T_world_last_measured_ = T_world_curr;
+  last_measured_utime_ = utime;
+  // A frame without depth cannot be dense alignment's reference: the last one with depth stays.
+  if (!config_.dense_fallback || !hasDepthCoverage(curr.depth_m)) return;
+  dense_reference_.gray = curr.gray;
+  dense_reference_.depth_m = curr.depth_m;
+  dense_reference_.K = curr.K;
+  dense_reference_.pyramid = curr.pyramid;
+  dense_reference_.T_world_camera = T_world_curr;
+  dense_reference_.utime = utime;
+}
+
+Matrix6d VisualOdometry::chainedCovariance(const SE3& T_prev_curr,
+                                           const Matrix6d& step_covariance) const {
+  // T_kf_curr = T_kf_prev exp(a) T_prev_curr exp(b) = T_kf_curr exp(Ad(T_prev_curr^-1) a + b).
+  const Matrix6d ad = adjointSE3(T_prev_curr.inverse());
+  return ad * covariance_keyframe_prev_ * ad.transpose() + step_covariance;
+}
+
+bool VisualOdometry::measureDense(CurrentFrame& curr, const SE3& T_world_pred, OdometryResult& res,
+                                  SE3& T_world_curr) {
+  if (!config_.dense_fallback || dense_reference_.gray.empty() || curr.gray.empty() ||
+      (state_ != TrackingState::kOk && state_ != TrackingState::kPredicted) ||
+      dense_reference_.K.width != curr.K.width || dense_reference_.K.height != curr.K.height) {
+    return false;
+  }
+  const std::int64_t t0 = steadyNowNs();
+  if (!dense_reference_.pyramid) {
+    dense_reference_.pyramid = std::make_shared<const DenseFrame>(makeDenseFrame(
+        dense_reference_.gray, dense_reference_.depth_m, dense_reference_.K, dense_options_));
+  }
+  curr.pyramid = std::make_shared<const DenseFrame>(
+      makeDenseFrame(curr.gray, curr.depth_m, curr.K, dense_options_));
+  // The prior: constant velocity from the last measured frame, as uncertain as a change of
+  // speed and turn rate over the interval allows.
+  const double interval_s =
+      std::max(static_cast<double>(curr.utime - dense_reference_.utime) * 1e-6, 1e-3);
+  const double sigma_m = config_.dense_prior_sigma_mps * interval_s;
+  const double sigma_rad = config_.dense_prior_sigma_degps * M_PI / 180.0 * interval_s;
+  Vector6d prior_variance;
+  prior_variance << Eigen::Vector3d::Constant(sigma_m * sigma_m),
+      Eigen::Vector3d::Constant(sigma_rad * sigma_rad);
+  const SE3& T_world_ref = dense_reference_.T_world_camera;
+  const DenseAlignmentResult dense =
+      alignDense(*dense_reference_.pyramid, *curr.pyramid, T_world_ref.inverse() * T_world_pred,
+                 Matrix6d(prior_variance.asDiagonal()), dense_options_);
+  res.stats.time_dense_ms = msSince(t0);
+  if (!dense.success) return false;
+  T_world_curr = normalizedSE3(T_world_ref * dense.T_ref_curr);
+  const double dt_s = static_cast<double>(curr.utime - last_measured_utime_) * 1e-6;
+  if (!implausibility(T_world_curr, dense.covariance, dt_s).empty()) {
+    ++res.stats.implausible_estimates;
+    return false;
+  }
+  res.status = OdometryStatus::kOk;
+  res.tracking_state = TrackingState::kOk;
+  res.T_ref_curr = dense.T_ref_curr;
+  res.covariance_ref_curr = dense.covariance;
+  res.covariance = dense.covariance;
+  res.ref_utime = dense_reference_.utime;
+  res.reference_keyframe_id = -1;
+  res.stats.used_dense_alignment = true;
+  res.stats.dense_degenerate_directions = dense.degenerate_directions;
+  return true;
 }
 
 }  // namespace slamd

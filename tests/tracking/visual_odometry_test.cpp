@@ -30,6 +30,8 @@ TEST(TrackingConfig, DefaultsAndValidation) {
   EXPECT_THROW(TrackingConfig::load(range), ConfigError);
   Config depth = Config::fromYamlString("tracking:\n  min_depth_m: 3.0\n  max_depth_m: 2.0\n");
   EXPECT_THROW(TrackingConfig::load(depth), ConfigError);
+  Config levels = Config::fromYamlString("tracking:\n  dense_levels: 3\n  dense_finest_level: 3\n");
+  EXPECT_THROW(TrackingConfig::load(levels), ConfigError);
 }
 
 TEST(VisualOdometry, BadInputReturnsAStatusWithoutThrowing) {
@@ -151,6 +153,7 @@ TEST(VisualOdometry, FovisTracksSyntheticTexturedRoom) {
 TEST(VisualOdometry, PredictsThroughAShortGapThenDeclaresLostAndStartsANewSegment) {
   TrackingConfig config;
   config.max_predicted_frames = 2;
+  config.dense_fallback = false;  // a frame without depth would be aligned photometrically
   VisualOdometry vo(config);
   const test::TexturedBox box({-2, -1.5, -1}, {2, 1.5, 3}, 5);
   int i = 0;
@@ -186,6 +189,54 @@ TEST(VisualOdometry, PredictsThroughAShortGapThenDeclaresLostAndStartsANewSegmen
   EXPECT_EQ(r.segment, 1);
   ASSERT_TRUE(r.keyframe);
   EXPECT_EQ(r.keyframe->segment, 1);
+}
+
+TEST(VisualOdometry, DenseAlignmentMeasuresFramesFeaturesCannot) {
+  VisualOdometry vo;
+  const test::TexturedBox box({-2, -1.5, -1}, {2, 1.5, 3}, 5);
+  const SE3 T_world0_box = trajectoryPose(0).inverse();
+  const auto render = [&](int i) {
+    RgbdFrame f = box.render(trajectoryPose(i), test::fr1Camera());
+    f.utime = 1'000'000 + i * 33'333;
+    return f;
+  };
+  const auto expectAt = [&](const OdometryResult& r, int i) {
+    const SE3 truth = T_world0_box * trajectoryPose(i);
+    EXPECT_LT((r.T_world_camera.translation() - truth.translation()).norm(), 0.005) << i;
+    EXPECT_LT(rotationErrorDeg(r.T_world_camera, truth), 0.2) << i;
+  };
+  for (int i = 0; i < 3; ++i) ASSERT_EQ(vo.processFrame(render(i)).status, OdometryStatus::kOk);
+  // An image without depth: photometric alignment against the last frame with depth.
+  RgbdFrame no_depth = render(3);
+  no_depth.depth_m.setTo(std::numeric_limits<float>::quiet_NaN());
+  OdometryResult r = vo.processFrame(no_depth);
+  EXPECT_EQ(r.status, OdometryStatus::kOk);
+  EXPECT_EQ(r.tracking_state, TrackingState::kOk);
+  EXPECT_TRUE(r.stats.used_dense_alignment);
+  expectAt(r, 3);
+  // A blank image with depth: no features at all, but the box's walls are planes.
+  RgbdFrame blank = render(4);
+  blank.gray.setTo(128);
+  blank.color_bgr.setTo(cv::Scalar(128, 128, 128));
+  r = vo.processFrame(blank);
+  EXPECT_EQ(r.status, OdometryStatus::kOk);
+  EXPECT_TRUE(r.stats.used_dense_alignment);
+  EXPECT_FALSE(r.is_keyframe);  // no features to track against later
+  expectAt(r, 4);
+  // Features again: tracked against the keyframe, still the first segment.
+  r = vo.processFrame(render(5));
+  EXPECT_EQ(r.status, OdometryStatus::kOk);
+  EXPECT_FALSE(r.stats.used_dense_alignment);
+  EXPECT_EQ(r.segment, 0);
+  expectAt(r, 5);
+  // Neither features nor depth nor image: nothing measures it.
+  RgbdFrame nothing = render(6);
+  nothing.gray.setTo(128);
+  nothing.color_bgr.setTo(cv::Scalar(128, 128, 128));
+  nothing.depth_m.setTo(std::numeric_limits<float>::quiet_NaN());
+  r = vo.processFrame(nothing);
+  EXPECT_EQ(r.tracking_state, TrackingState::kPredicted);
+  EXPECT_FALSE(r.stats.used_dense_alignment);
 }
 
 /// Tracks frames 0..9 of trajectoryPose(), then frame 10 with the camera rolled by 180 deg about

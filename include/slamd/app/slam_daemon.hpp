@@ -59,6 +59,8 @@ struct DaemonSummary {
   std::uint64_t poses_not_initialized = 0;
   /// Motion estimates vetoed as beyond the camera's motion limits (then retried or predicted).
   std::uint64_t implausible_estimates = 0;
+  /// Poses measured by dense alignment where features failed (part of poses_tracked).
+  std::uint64_t dense_aligned_frames = 0;
   double longest_loss_s = 0.0;        ///< longest run of predicted or lost poses, frame time
   bool tracking_lost_at_end = false;  ///< the last published pose was not measured
   // Gaps in the camera's frames (more than 0.5 s of capture time between two poses: a camera

@@ -185,11 +185,16 @@ class TrackingStep : public StepBase {
   std::uint64_t implausibleEstimates() const {
     return implausible_estimates_.load(std::memory_order_relaxed);
   }
+  /// Frames measured by dense alignment because features failed, so far (any thread).
+  std::uint64_t denseAlignedFrames() const {
+    return dense_aligned_frames_.load(std::memory_order_relaxed);
+  }
 
  private:
   VisualOdometry odometry_;
   std::atomic<int> tracking_state_{static_cast<int>(TrackingState::kNotInitialized)};
   std::atomic<std::uint64_t> implausible_estimates_{0};
+  std::atomic<std::uint64_t> dense_aligned_frames_{0};
 };
 
 // --- vanishing points (parallel to tracking) ---------------------------------------------------

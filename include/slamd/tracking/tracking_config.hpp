@@ -96,6 +96,14 @@ struct TrackingConfig {
   int max_predicted_frames = 5;
   double failure_sigma_scale = 10.0;
 
+  // --- Dense alignment where features fail (dense_alignment.hpp) ------------------------------
+  bool dense_fallback = true;
+  int dense_levels = 4;
+  int dense_finest_level = 1;
+  double dense_min_gradient = 4.0;
+  double dense_prior_sigma_mps = 0.6;
+  double dense_prior_sigma_degps = 60.0;
+
   // --- Plausibility ---------------------------------------------------------------------------
   /// An estimate implying faster motion is vetoed and tracking retried. Not tracking.* keys:
   /// load() reads the filter's filter.max_speed_mps and filter.max_angular_rate_radps.

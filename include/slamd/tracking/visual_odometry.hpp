@@ -17,9 +17,12 @@
 // image when guidance fails), the motion is estimated by RANSAC + closed-form rigid fit (or a
 // maximum consistent clique for FOVIS) and refined robustly on SE(3). When the keyframe cannot be
 // tracked the previous frame is tried. A frame becomes a keyframe when inliers, overlap or motion
-// since the keyframe cross thresholds. Failed frames are bridged by constant-velocity prediction
-// for tracking.max_predicted_frames frames; then tracking is LOST and the next trackable frame
-// starts a new segment (a new keyframe at the last predicted pose).
+// since the keyframe cross thresholds. When features cannot measure a frame (a plain wall, a fast
+// turn in front of it), dense alignment against the last measured frame does
+// (tracking.dense_fallback); such a frame with enough features becomes a keyframe. Frames nothing
+// measures are bridged by constant-velocity prediction for tracking.max_predicted_frames frames;
+// then tracking is LOST and the next trackable frame starts a new segment (a new keyframe at the
+// last predicted pose).
 
 #include <array>
 #include <cstdint>
@@ -33,6 +36,7 @@
 #include "slamd/common/pose_estimate.hpp"
 #include "slamd/common/rgbd_frame.hpp"
 #include "slamd/common/se3.hpp"
+#include "slamd/tracking/dense_alignment.hpp"
 #include "slamd/tracking/features.hpp"
 #include "slamd/tracking/motion_estimation.hpp"
 #include "slamd/tracking/tracking_config.hpp"
@@ -82,11 +86,14 @@ struct OdometryStats {
   int num_inliers = 0;                 ///< matches consistent with the estimated motion
   double reprojection_error_px = 0.0;  ///< RMS over the inliers
   bool used_guided_matching = false;
-  bool used_previous_frame = false;  ///< the keyframe failed; tracked from the previous frame
-  int implausible_estimates = 0;     ///< estimates vetoed by the motion limits (then retried)
-  double time_features_ms = 0.0;     ///< extraction + undistortion + depth
+  bool used_previous_frame = false;     ///< the keyframe failed; tracked from the previous frame
+  int implausible_estimates = 0;        ///< estimates vetoed by the motion limits (then retried)
+  bool used_dense_alignment = false;    ///< features failed; dense alignment measured the frame
+  int dense_degenerate_directions = 0;  ///< directions dense alignment left to the motion prior
+  double time_features_ms = 0.0;        ///< extraction + undistortion + depth
   double time_matching_ms = 0.0;
   double time_motion_ms = 0.0;  ///< RANSAC / clique + refinement
+  double time_dense_ms = 0.0;   ///< dense alignment (pyramids and alignment), when tried
   double time_total_ms = 0.0;
 };
 
@@ -108,7 +115,9 @@ struct OdometryResult {
   /// previous frame, this is the covariance of the keyframe measurement (a conservative bound).
   Matrix6d covariance = Matrix6d::Identity();
   /// The measurement itself: T_ref_curr against the reference (keyframe or previous frame) with
-  /// its covariance from the normal equations.
+  /// its covariance from the normal equations. A keyframe that was not measured straight against
+  /// the previous keyframe carries the chain since it instead: T_ref_curr from the previous
+  /// keyframe, with the covariance accumulated along the chain.
   SE3 T_ref_curr = SE3::Identity();
   Matrix6d covariance_ref_curr = Matrix6d::Identity();
   Utime ref_utime = 0;
@@ -173,6 +182,19 @@ class VisualOdometry {
                            OdometryResult& res);
   void addKeyframe(const CurrentFrame& curr, const RgbdFrame& frame, const RgbdFramePtr& frame_ptr,
                    const SE3& T_world_curr, OdometryResult& res);
+  /// Dense alignment of the current frame against the last measured frame with depth, when
+  /// features failed;
+  /// true (and res filled as a measured frame) when it succeeded and the motion is plausible.
+  bool measureDense(CurrentFrame& curr, const SE3& T_world_pred, OdometryResult& res,
+                    SE3& T_world_curr);
+  /// A measured frame (features or dense): keyframe if asked, motion model, state, commit.
+  OdometryResult acceptMeasurement(OdometryResult res, const CurrentFrame& curr,
+                                   const RgbdFrame& frame, const RgbdFramePtr& frame_ptr,
+                                   const SE3& T_world_curr, bool new_keyframe,
+                                   std::int64_t t_start);
+  void rememberMeasuredFrame(const CurrentFrame& curr, const SE3& T_world_curr, Utime utime);
+  /// Covariance of T_keyframe_curr for a frame reached through T_prev_curr with step covariance.
+  Matrix6d chainedCovariance(const SE3& T_prev_curr, const Matrix6d& step_covariance) const;
   /// A failed frame: predicted with constant velocity for a short gap, then LOST.
   OdometryResult fail(OdometryResult res, OdometryStatus status,
                       std::shared_ptr<const FeatureSet> features, std::int64_t t_start);
@@ -230,6 +252,20 @@ class VisualOdometry {
   SE3 T_world_last_measured_ = SE3::Identity();
   Utime last_measured_utime_ = 0;
   cv::Mat prev_small_;  ///< blurred 80x60 image of the previous frame (FOVIS rotation alignment)
+  /// Covariance of T_keyframe_prev along the chain of measurements since the keyframe.
+  Matrix6d covariance_keyframe_prev_ = Matrix6d::Zero();
+
+  /// The last measured frame with depth: dense alignment's reference.
+  struct DenseReference {
+    cv::Mat gray;
+    cv::Mat depth_m;
+    CameraIntrinsics K;
+    std::shared_ptr<const DenseFrame> pyramid;  ///< built when first needed
+    SE3 T_world_camera = SE3::Identity();
+    Utime utime = 0;
+  };
+  DenseReference dense_reference_;
+  DenseAlignmentOptions dense_options_;
 };
 
 }  // namespace slamd
