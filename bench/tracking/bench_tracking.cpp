@@ -8,6 +8,7 @@
 #include <benchmark/benchmark.h>
 #include <opencv2/core.hpp>
 
+#include "slamd/tracking/dense_alignment.hpp"
 #include "slamd/tracking/features.hpp"
 #include "slamd/tracking/motion_estimation.hpp"
 #include "slamd/tracking/visual_odometry.hpp"
@@ -132,6 +133,48 @@ void BM_RefinePose(benchmark::State& state) {
   }
 }
 BENCHMARK(BM_RefinePose)->Arg(500)->Unit(benchmark::kMicrosecond);
+
+/// Dense alignment's pyramid of one frame (grey, gradients, depth, normals).
+void BM_DenseFrame(benchmark::State& state) {
+  cv::setNumThreads(1);
+  DenseAlignmentOptions options;
+  options.finest_level = static_cast<int>(state.range(0));
+  const RgbdFrame& frame = sequence()[0];
+  for (auto _ : state) {
+    const DenseFrame pyramid = makeDenseFrame(frame.gray, frame.depth_m, frame.intrinsics, options);
+    benchmark::DoNotOptimize(pyramid.levels.size());
+  }
+}
+BENCHMARK(BM_DenseFrame)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
+
+/// Dense alignment of frame 3 to frame 0 from a constant-velocity-like prior (one frame's motion
+/// off), finest level as the argument (1 = half resolution, the default).
+void BM_DenseAlign(benchmark::State& state) {
+  cv::setNumThreads(1);
+  DenseAlignmentOptions options;
+  options.finest_level = static_cast<int>(state.range(0));
+  const RgbdFrame& ref_frame = sequence()[0];
+  const RgbdFrame& curr_frame = sequence()[3];
+  const DenseFrame ref =
+      makeDenseFrame(ref_frame.gray, ref_frame.depth_m, ref_frame.intrinsics, options);
+  const DenseFrame curr =
+      makeDenseFrame(curr_frame.gray, curr_frame.depth_m, curr_frame.intrinsics, options);
+  const SE3 truth = pose(0).inverse() * pose(3);
+  const SE3 prior = pose(0).inverse() * pose(2);
+  Vector6d variance;
+  variance << Eigen::Vector3d::Constant(0.02 * 0.02), Eigen::Vector3d::Constant(0.035 * 0.035);
+  const Matrix6d prior_covariance = variance.asDiagonal();
+  DenseAlignmentResult result;
+  for (auto _ : state) {
+    result = alignDense(ref, curr, prior, prior_covariance, options);
+    benchmark::DoNotOptimize(result.T_ref_curr);
+  }
+  const SE3 error = truth.inverse() * result.T_ref_curr;
+  state.counters["error_mm"] = error.translation().norm() * 1e3;
+  state.counters["error_deg"] = rotationAngleRad(error.linear()) * 180.0 / M_PI;
+  state.counters["iterations"] = result.iterations;
+}
+BENCHMARK(BM_DenseAlign)->Arg(0)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond);
 
 }  // namespace
 }  // namespace slamd

@@ -51,8 +51,8 @@ cv::Mat downsampleDepth(const cv::Mat& depth_m) {
 /// does not give: so the normals come from the depth averaged over a window (valid pixels only)
 /// and differences across a wider stencil.
 cv::Mat computeNormals(const cv::Mat& depth_m, const CameraIntrinsics& K) {
-  constexpr int kWindow = 5;   // averaging window, pixels
-  constexpr int kStencil = 2;  // half-width of the differences, pixels
+  constexpr int kWindow = 5;           // averaging window, pixels
+  constexpr int kStencil = 2;          // half-width of the differences, pixels
   cv::Mat valid = depth_m == depth_m;  // false for NaN
   cv::Mat filled = depth_m.clone();
   filled.setTo(0.0F, ~valid);
@@ -221,8 +221,7 @@ class LevelAligner {
       if (std::abs(r) > gate_m_) continue;
       const double sigma =
           std::max(options_.min_depth_sigma_m, options_.depth_sigma_coeff * z_curr * z_curr);
-      e.add(n.transpose() * dX * keep_geometric, r, sigma, k, divisor, e.geometric,
-            e.geometric_sq);
+      e.add(n.transpose() * dX * keep_geometric, r, sigma, k, divisor, e.geometric, e.geometric_sq);
     }
     return e;
   }
@@ -431,8 +430,7 @@ DenseAlignmentResult alignDense(const DenseFrame& ref, const DenseFrame& curr,
   const Eigen::GeneralizedSelfAdjointEigenSolver<Matrix6d> directions(
       final_evaluation.H, prior_information, Eigen::EigenvaluesOnly);
   if (directions.info() != Eigen::Success) return finish("no finite solution");
-  result.degenerate_directions =
-      static_cast<int>((directions.eigenvalues().array() < 1.0).count());
+  result.degenerate_directions = static_cast<int>((directions.eigenvalues().array() < 1.0).count());
   if (6 - result.degenerate_directions < options.min_constrained_directions) {
     return finish("the images constrain too few directions of the motion");
   }

@@ -851,7 +851,8 @@ VisualOdometry::ReferenceMeasurement VisualOdometry::measureAgainstReference(
   return m;
 }
 
-bool VisualOdometry::needsNewKeyframe(const TrackAttempt& attempt, const Keyframe& kf) const {
+bool VisualOdometry::needsNewKeyframe(const TrackAttempt& attempt, const Keyframe& kf,
+                                      int features_with_depth) const {
   const double overlap =
       static_cast<double>(attempt.num_inliers) / std::max(1, kf.features.num_with_depth);
   const double translation_m = attempt.T_ref_curr.translation().norm();
@@ -863,9 +864,12 @@ bool VisualOdometry::needsNewKeyframe(const TrackAttempt& attempt, const Keyfram
     max_translation_m =
         std::min(max_translation_m, config_.keyframe_max_baseline_ratio * kf.median_depth_m);
   }
-  return attempt.num_inliers < config_.keyframe_min_inliers ||
-         overlap < config_.keyframe_min_overlap || translation_m > max_translation_m ||
-         rotation_deg > config_.keyframe_max_rotation_deg;
+  // Few inliers call for a keyframe only when the frame has many more features to offer: where
+  // the scene has few (a plain corridor), a new keyframe would hold no more than the old one.
+  const bool few_inliers = attempt.num_inliers < config_.keyframe_min_inliers &&
+                           features_with_depth >= 2 * attempt.num_inliers;
+  return few_inliers || overlap < config_.keyframe_min_overlap ||
+         translation_m > max_translation_m || rotation_deg > config_.keyframe_max_rotation_deg;
 }
 
 bool VisualOdometry::reuseRecentKeyframe(const CurrentFrame& curr, TrackAttempt& attempt,
@@ -894,7 +898,8 @@ bool VisualOdometry::reuseRecentKeyframe(const CurrentFrame& curr, TrackAttempt&
         track(kf->features, kf->T_world_camera.inverse() * T_world_curr, true, curr);
     res.stats.time_matching_ms += reuse.time_matching_ms;
     res.stats.time_motion_ms += reuse.time_motion_ms;
-    if (reuse.status == OdometryStatus::kOk && !needsNewKeyframe(reuse, *kf)) {
+    if (reuse.status == OdometryStatus::kOk &&
+        !needsNewKeyframe(reuse, *kf, curr.features->num_with_depth)) {
       keyframe_ = kf;
       attempt = reuse;
       T_world_curr = normalizedSE3(kf->T_world_camera * reuse.T_ref_curr);
@@ -1004,7 +1009,8 @@ OdometryResult VisualOdometry::process(const RgbdFrame& frame, const RgbdFramePt
   res.reference_keyframe_id = measured.ref_id;
 
   SE3 T_world_curr = normalizedSE3(measured.T_world_ref * attempt.T_ref_curr);
-  bool new_keyframe = measured.from_previous || needsNewKeyframe(attempt, *keyframe_);
+  bool new_keyframe = measured.from_previous ||
+                      needsNewKeyframe(attempt, *keyframe_, curr.features->num_with_depth);
   if (new_keyframe && config_.keyframe_window > 1 &&
       reuseRecentKeyframe(curr, attempt, T_world_curr, res)) {
     new_keyframe = false;

@@ -2,12 +2,14 @@
 // prior, a plain corridor's free direction left to the prior and shown in the covariance, and
 // failures reported for inputs that do not fit.
 
+#include "slamd/tracking/dense_alignment.hpp"
+
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <limits>
-#include <string>
 #include <memory>
+#include <string>
 
 #include <Eigen/Eigenvalues>
 #include <gtest/gtest.h>
@@ -15,7 +17,6 @@
 #include <opencv2/imgproc.hpp>
 
 #include "slamd/synth/synthetic_source.hpp"
-#include "slamd/tracking/dense_alignment.hpp"
 
 namespace slamd {
 namespace {
@@ -65,11 +66,14 @@ TEST(DenseAlignment, RoomFramesAlignFromAPerturbedPrior) {
     Vector6d offset;
     offset << 0.02, -0.015, 0.01, 1.0 * kDeg, -1.5 * kDeg, 0.5 * kDeg;
     const SE3 prior = truth * expSE3(offset);
-    const DenseAlignmentResult r = alignDense(ref, curr, prior, priorCovariance(0.05, 3.0), options);
+    const DenseAlignmentResult r =
+        alignDense(ref, curr, prior, priorCovariance(0.05, 3.0), options);
     ASSERT_TRUE(r.success) << r.failure;
     const SE3 error = truth.inverse() * r.T_ref_curr;
     if (std::getenv("SLAMD_DENSE_DEBUG")) {
-      std::fprintf(stderr, "frame %d: err %.5f m %.4f deg, %d+%d residuals, rms %.2f / %.4f m, %d it, %.1f ms, sigma %.5f m %.4f deg\n",
+      std::fprintf(stderr,
+                   "frame %d: err %.5f m %.4f deg, %d+%d residuals, rms %.2f / %.4f m, %d it, %.1f "
+                   "ms, sigma %.5f m %.4f deg\n",
                    ref_index, error.translation().norm(), rotationAngleRad(error.linear()) / kDeg,
                    r.photometric_residuals, r.geometric_residuals, r.photometric_rms,
                    r.geometric_rms_m, r.iterations, r.time_ms, std::sqrt(r.covariance(0, 0)),
@@ -81,7 +85,8 @@ TEST(DenseAlignment, RoomFramesAlignFromAPerturbedPrior) {
     EXPECT_GT(r.photometric_residuals, 1000);
     EXPECT_GT(r.geometric_residuals, 1000);
     // The covariance is the data's, far below the prior's in every direction.
-    for (int k = 0; k < 6; ++k) EXPECT_LT(r.covariance(k, k), 0.01 * priorCovariance(0.05, 3.0)(k, k));
+    for (int k = 0; k < 6; ++k)
+      EXPECT_LT(r.covariance(k, k), 0.01 * priorCovariance(0.05, 3.0)(k, k));
   }
 }
 
@@ -90,9 +95,8 @@ TEST(DenseAlignment, APlainCorridorLeavesTheTranslationAlongItToThePrior) {
   // parallel to the world's x axis; the end wall beyond the depth range): the planes fix five
   // degrees of freedom, not the sixth.
   cv::setNumThreads(1);
-  const auto source =
-      makeSource("corridor", {"synthetic.trajectory=zigzag", "synthetic.doors=false",
-                              "synthetic.posters=false"});
+  const auto source = makeSource("corridor", {"synthetic.trajectory=zigzag",
+                                              "synthetic.doors=false", "synthetic.posters=false"});
   const DenseAlignmentOptions options;
   const int ref_index = 40;
   const int curr_index = 43;

@@ -36,11 +36,11 @@
 namespace slamd {
 
 struct DenseAlignmentOptions {
-  int levels = 4;        ///< pyramid levels; level k has 1/2^k the resolution
-  int finest_level = 1;  ///< the finest level aligned (1 = half resolution)
-  int max_iterations = 12;             ///< Gauss-Newton iterations per level
-  double min_gradient = 4.0;           ///< grey levels per pixel: photometric residuals above it
-  double min_depth_m = 0.3;            ///< depths outside [min, max] are ignored
+  int levels = 4;             ///< pyramid levels; level k has 1/2^k the resolution
+  int finest_level = 1;       ///< the finest level aligned (1 = half resolution)
+  int max_iterations = 12;    ///< Gauss-Newton iterations per level
+  double min_gradient = 4.0;  ///< grey levels per pixel: photometric residuals above it
+  double min_depth_m = 0.3;   ///< depths outside [min, max] are ignored
   double max_depth_m = 5.0;
   double depth_sigma_coeff = 0.0015;   ///< sigma_z = coeff * z^2, metres
   double min_depth_sigma_m = 0.002;    ///< floor on sigma_z (quantisation, calibration)
@@ -65,11 +65,11 @@ struct DenseAlignmentOptions {
 struct DenseFrame {
   struct Level {
     CameraIntrinsics K;
-    cv::Mat gray;      ///< CV_32F, grey levels 0-255
-    cv::Mat grad_x;    ///< CV_32F, grey levels per pixel
+    cv::Mat gray;    ///< CV_32F, grey levels 0-255
+    cv::Mat grad_x;  ///< CV_32F, grey levels per pixel
     cv::Mat grad_y;
-    cv::Mat depth_m;   ///< CV_32F, NaN where unknown
-    cv::Mat normals;   ///< CV_32FC3, unit, facing the camera; NaN where unknown
+    cv::Mat depth_m;  ///< CV_32F, NaN where unknown
+    cv::Mat normals;  ///< CV_32FC3, unit, facing the camera; NaN where unknown
   };
   std::vector<Level> levels;
   bool empty() const { return levels.empty(); }

@@ -173,7 +173,9 @@ class VisualOdometry {
   /// earlier), given the estimate's covariance; else why not.
   std::string implausibility(const SE3& T_world_curr, const Matrix6d& covariance,
                              double dt_s) const;
-  bool needsNewKeyframe(const TrackAttempt& attempt, const Keyframe& kf) const;
+  /// features_with_depth: the current frame's.
+  bool needsNewKeyframe(const TrackAttempt& attempt, const Keyframe& kf,
+                        int features_with_depth) const;
   /// Measures against a recent keyframe near T_world_curr instead of making a new one; true (and
   /// attempt, T_world_curr and res updated) when one was good enough.
   bool reuseRecentKeyframe(const CurrentFrame& curr, TrackAttempt& attempt, SE3& T_world_curr,
