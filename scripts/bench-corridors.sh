@@ -6,7 +6,9 @@
 #   zigzag  hand-held walk down a 33 m corridor (first leg: 30 m)
 #   robot   a robot's lap of a 17 m corridor (down, a 180 degree turn, back: about 30 m)
 # For each run it reports ATE, ATE as % of the distance travelled, frames with a pose, keyframes
-# per metre and per second, and the worst per-frame rotation error, against the issue's targets
+# per metre and per second, the worst per-frame rotation error, the end yaw error (heading
+# change over the walk, estimate against truth) and the frames dense alignment measured,
+# against the issue's targets
 # (ATE <= 0.03 m and <= 0.2% of distance, every frame posed, no frame-to-frame rotation error
 # above 1 deg, at most one keyframe per 0.3 m).
 #
@@ -98,6 +100,30 @@ def frame_rotation_errors_deg(truth, estimate):
             errors.append(angle_deg(relative_rotation(true_move, estimated_move)))
     return errors
 
+def rotation_vector(r):
+    """Axis times angle (radians) of a rotation matrix."""
+    angle = math.acos(max(-1.0, min(1.0, (r[0][0] + r[1][1] + r[2][2] - 1) / 2)))
+    if angle < 1e-9:
+        return [0.0, 0.0, 0.0]
+    k = angle / (2 * math.sin(angle))
+    return [k * (r[2][1] - r[1][2]), k * (r[0][2] - r[2][0]), k * (r[1][0] - r[0][1])]
+
+def end_yaw_error_deg(truth, estimate):
+    """Heading error at the end: the rotation from the first to the last frame both have, estimate
+    against truth, about gravity (the synthetic world's z axis), in degrees."""
+    stamps = sorted(stamp for stamp in truth if stamp in estimate)
+    if len(stamps) < 2:
+        return None
+    first, last = stamps[0], stamps[-1]
+    true_move = relative_rotation(truth[first][1], truth[last][1])
+    estimated_move = relative_rotation(estimate[first][1], estimate[last][1])
+    # estimated_move * true_move^T: the error, in the first camera's frame.
+    error = [[sum(estimated_move[i][k] * true_move[j][k] for k in range(3)) for j in range(3)]
+             for i in range(3)]
+    up_in_first_camera = truth[first][1][2]  # R_world_camera^T z = the matrix's third row
+    w = rotation_vector(error)
+    return math.degrees(sum(w[i] * up_in_first_camera[i] for i in range(3)))
+
 rows = []
 for seed in seeds:
     for walk in walks:
@@ -140,6 +166,8 @@ for seed in seeds:
             "median_frame_rotation_deg":
                 rotation_errors[len(rotation_errors) // 2] if rotation_errors else None,
             "frames_over_1deg": sum(1 for e in rotation_errors if e > 1.0),
+            "end_yaw_error_deg": end_yaw_error_deg(truth, estimate),
+            "dense_aligned_frames": find(metrics, "dense_aligned_frames") or 0,
             "rpe_1frame_rotation_rmse_deg": rpe["rotation"]["rmse"],
             "wall_s": wall_s,
             "drawn": metrics.get("source_description", "").partition("variety: ")[2],
@@ -154,19 +182,20 @@ for seed in seeds:
 json.dump(rows, open(os.path.join(out, "results.json"), "w"), indent=1)
 
 def mark(ok): return "" if ok else " ✗"
-lines = ["| case | distance m | ATE m | ATE % | posed | worst frame rotation error deg (frames over 1 deg) | m per keyframe | keyframes/s | wall s |",
-         "|---|---|---|---|---|---|---|---|---|"]
+lines = ["| case | distance m | ATE m | ATE % | posed | worst frame rotation error deg (frames over 1 deg) | end yaw error deg | m per keyframe | keyframes/s | dense frames | wall s |",
+         "|---|---|---|---|---|---|---|---|---|---|---|"]
 for r in rows:
     if "error" in r:
-        lines.append(f"| {r['case']} | failed: {r['error']} |||||||")
+        lines.append(f"| {r['case']} | failed: {r['error']} |||||||||")
         continue
     t = r["targets"]
     lines.append(
         f"| {r['case']} | {r['distance_m']:.1f} | {r['ate_m']:.4f}{mark(t['ate'])} | "
         f"{r['ate_percent']:.3f} | {r['frames_posed']}/{r['frames']}{mark(t['every_frame_posed'])} | "
         f"{r['worst_frame_rotation_deg'] or 0:.2f}{mark(t['rotation'])} ({r['frames_over_1deg']} > 1) | "
+        f"{r['end_yaw_error_deg'] or 0:.2f} | "
         f"{(r['metres_per_keyframe'] or 0):.3f}{mark(t['keyframes'])} | {r['keyframes_per_s']:.2f} | "
-        f"{r['wall_s']:.0f} |")
+        f"{r['dense_aligned_frames']} | {r['wall_s']:.0f} |")
 ok = [r for r in rows if "error" not in r]
 passed = sum(all(r["targets"].values()) for r in ok)
 lines.append("")
