@@ -8,6 +8,7 @@
 #include <Eigen/Eigenvalues>
 #include <opencv2/imgproc.hpp>
 
+#include "robust_statistics.hpp"
 #include "slamd/common/time.hpp"
 
 namespace slamd {
@@ -105,23 +106,6 @@ cv::Mat computeNormals(const cv::Mat& depth_m, const CameraIntrinsics& K) {
   return normals;
 }
 
-double huberWeight(double normalized_residual, double k) {
-  const double a = std::abs(normalized_residual);
-  return a <= k ? 1.0 : k / a;
-}
-
-double huberCost(double normalized_residual, double k) {
-  const double a = std::abs(normalized_residual);
-  return a <= k ? 0.5 * a * a : k * (a - 0.5 * k);
-}
-
-double median(std::vector<double> values) {
-  if (values.empty()) return 0.0;
-  auto middle = values.begin() + static_cast<std::ptrdiff_t>(values.size() / 2);
-  std::nth_element(values.begin(), middle, values.end());
-  return *middle;
-}
-
 /// A reference pixel used at one level.
 struct Sample {
   Eigen::Vector3d point_ref;  ///< metres, reference camera frame
@@ -143,13 +127,13 @@ struct Evaluation {
   /// squared inlier residuals are its kind's.
   void add(const Eigen::Matrix<double, 1, 6>& J, double r, double sigma, double k, double divisor,
            int& count, double& inlier_sq) {
-    const double normalized = r / sigma;
+    const double normalized = std::abs(r) / sigma;
     const double w = huberWeight(normalized, k) / (sigma * sigma * divisor);
     H.noalias() += w * J.transpose() * J;
     g.noalias() += w * r * J.transpose();
     cost += huberCost(normalized, k) / divisor;
     ++count;
-    if (std::abs(normalized) <= k) inlier_sq += r * r;
+    if (normalized <= k) inlier_sq += r * r;
   }
 };
 
@@ -175,7 +159,7 @@ class LevelAligner {
       if (!project(y, u, v)) continue;
       magnitudes.push_back(std::abs(sampleBilinear(curr_.gray, u, v) - s.intensity));
     }
-    return std::max(options_.min_photometric_sigma, 1.4826 * median(std::move(magnitudes)));
+    return std::max(options_.min_photometric_sigma, 1.4826 * medianInPlace(magnitudes));
   }
 
   Evaluation evaluate(const SE3& T_ref_curr, double photometric_sigma) const {
@@ -376,9 +360,9 @@ DenseAlignmentResult alignDense(const DenseFrame& ref, const DenseFrame& curr,
   const Matrix6d prior_information = prior_ldlt.solve(Matrix6d::Identity());
   const SE3 prior_inverse = T_ref_curr_prior.inverse();
   const auto priorResidual = [&](const SE3& T) { return logSE3(prior_inverse * T); };
-  const auto priorCost = [&](const SE3& T) {
+  const auto priorCost = [&](const SE3& T) {  // on huberCost's scale: the squared residual
     const Vector6d r = priorResidual(T);
-    return 0.5 * r.dot(prior_information * r);
+    return r.dot(prior_information * r);
   };
 
   SE3 T = T_ref_curr_prior;

@@ -8,16 +8,12 @@
 #include <Eigen/LU>
 #include <Eigen/SVD>
 
+#include "robust_statistics.hpp"
+
 namespace slamd {
 namespace {
 
 double depthSigma(double z, double coeff) { return coeff * z * z; }
-
-/// Huber weight for a whitened residual of norm s (IRLS).
-double huberWeight(double s, double k) { return s <= k ? 1.0 : k / s; }
-
-/// Huber cost of a whitened residual of norm s.
-double huberCost(double s, double k) { return s <= k ? s * s : 2.0 * k * s - k * k; }
 
 }  // namespace
 
@@ -269,12 +265,6 @@ int residualFromInverse(const Correspondence& c, const CameraIntrinsics& K, cons
   return 2;
 }
 
-double median(std::vector<double>& values) {
-  const auto mid = values.begin() + static_cast<std::ptrdiff_t>(values.size() / 2);
-  std::nth_element(values.begin(), mid, values.end());
-  return *mid;
-}
-
 /// Robust noise scales of the whitened reprojection and depth residuals at T_ref_curr: the
 /// median residual over its expected value for unit Gaussian noise (norm of 2D: 1.1774 sigma;
 /// absolute 1D: 0.6745 sigma). Clamped to [kMinNoiseScale, kMaxNoiseScale]; 1 with too few
@@ -299,10 +289,10 @@ void estimateNoiseScales(const std::vector<Correspondence>& matches,
   scale_px = 1.0;
   scale_depth = 1.0;
   if (px.size() >= kMinResiduals) {
-    scale_px = std::clamp(median(px) / 1.1774, kMinNoiseScale, kMaxNoiseScale);
+    scale_px = std::clamp(medianInPlace(px) / 1.1774, kMinNoiseScale, kMaxNoiseScale);
   }
   if (depth.size() >= kMinResiduals) {
-    scale_depth = std::clamp(median(depth) / 0.6745, kMinNoiseScale, kMaxNoiseScale);
+    scale_depth = std::clamp(medianInPlace(depth) / 0.6745, kMinNoiseScale, kMaxNoiseScale);
   }
 }
 

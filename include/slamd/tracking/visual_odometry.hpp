@@ -185,8 +185,8 @@ class VisualOdometry {
   void addKeyframe(const CurrentFrame& curr, const RgbdFrame& frame, const RgbdFramePtr& frame_ptr,
                    const SE3& T_world_curr, OdometryResult& res);
   /// Dense alignment of the current frame against the last measured frame with depth, when
-  /// features failed;
-  /// true (and res filled as a measured frame) when it succeeded and the motion is plausible.
+  /// features failed; true (and res filled as a measured frame) when it succeeded and the motion
+  /// is plausible.
   bool measureDense(CurrentFrame& curr, const SE3& T_world_pred, OdometryResult& res,
                     SE3& T_world_curr);
   /// A measured frame (features or dense): keyframe if asked, motion model, state, commit.
