@@ -180,11 +180,16 @@ void recordOni(const std::string& device_uri, const std::string& path, int frame
     streams[index]->readFrame(&frame);
     (index == 0 ? depth_frames : color_frames) += 1;
   }
+  // The order matters. OpenNI2's frame thread holds its stream's recorder lock while it hands a
+  // frame to the recorder, which then takes its own stream lock; destroying the recorder takes
+  // the two in the other order. A frame arriving during the destroy deadlocked (a hang seen once
+  // in CI). So the streams are stopped, and their driver threads given time to see it, before
+  // the recorder is destroyed: no frame can be in flight then.
   recorder.stop();
-  recorder.destroy();
   depth.stop();
   if (has_color) color.stop();
   waitForDriverThreads();
+  recorder.destroy();
   depth.destroy();
   if (has_color) color.destroy();
   device.close();
