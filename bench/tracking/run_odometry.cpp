@@ -70,7 +70,7 @@ int main(int argc, char** argv) {
   // Thread CPU time per frame: what the work costs on one core, unaffected by other processes
   // competing for the CPU (wall-clock times above include waiting for a core).
   std::vector<double> cpu_ms;
-  int frames = 0, failures = 0, keyframes = 0, lost = 0, implausible = 0;
+  int frames = 0, failures = 0, keyframes = 0, lost = 0, implausible = 0, prior_disagreements = 0;
   double inliers_sum = 0.0;
   while (max_frames <= 0 || frames < max_frames) {
     FrameRead read = source->next(std::chrono::milliseconds(1000));
@@ -88,6 +88,7 @@ int main(int argc, char** argv) {
     if (r.tracking_state == TrackingState::kLost) ++lost;
     if (r.is_keyframe) ++keyframes;
     implausible += r.stats.implausible_estimates;
+    prior_disagreements += r.stats.prior_disagreements;
     inliers_sum += r.stats.num_inliers;
     estimate.push_back({utimeToSeconds(r.utime), r.T_world_camera});
   }
@@ -113,6 +114,7 @@ int main(int argc, char** argv) {
   report.set("keyframes_per_m", path_m > 0.0 ? keyframes / path_m : 0.0);
   report.set("keyframes_per_s", duration_s > 0.0 ? keyframes / duration_s : 0.0);
   report.set("implausible_estimates_count", implausible);
+  report.set("prior_disagreements_count", prior_disagreements);
   report.set("mean_inliers_count", frames ? inliers_sum / frames : 0.0);
   report.setLatencySamples("tracking", total_ms);
   report.setLatencySamples("tracking_cpu", cpu_ms);

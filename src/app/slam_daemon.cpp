@@ -574,6 +574,7 @@ void SlamDaemon::Impl::summarize(const std::vector<StageStats>& stats,
   summary.poses_lost = tally.lost.load();
   summary.poses_not_initialized = tally.not_initialized.load();
   summary.implausible_estimates = steps->tracking->implausibleEstimates();
+  summary.prior_disagreements = steps->tracking->priorDisagreements();
   summary.dense_aligned_frames = steps->tracking->denseAlignedFrames();
   summary.longest_loss_s = tally.longest_loss_s;
   summary.tracking_lost_at_end = tally.loss_start_utime.load() >= 0;
@@ -656,6 +657,11 @@ void SlamDaemon::Impl::logTrackingSummary() const {
                          << " motion estimates vetoed as beyond the camera's motion limits "
                             "(filter.max_speed_mps, filter.max_angular_rate_radps), none published";
   }
+  if (summary.prior_disagreements > 0) {
+    SLAMD_LOG_INFO(kLog) << "tracking: " << summary.prior_disagreements
+                         << " motion estimates rejected as too far from the constant-velocity "
+                            "prediction (tracking.motion_prior_gate_sigma), then retried";
+  }
   if (summary.capture_gaps > 0) {
     std::ostringstream gaps;
     gaps.precision(2);
@@ -720,6 +726,7 @@ bool SlamDaemon::Impl::writeMetrics(const std::vector<StageStats>& stats) {
   json.key("poses_predicted").value(static_cast<std::int64_t>(summary.poses_predicted));
   json.key("poses_lost").value(static_cast<std::int64_t>(summary.poses_lost));
   json.key("implausible_estimates").value(static_cast<std::int64_t>(summary.implausible_estimates));
+  json.key("prior_disagreements").value(static_cast<std::int64_t>(summary.prior_disagreements));
   json.key("dense_aligned_frames").value(static_cast<std::int64_t>(summary.dense_aligned_frames));
   json.key("longest_loss_s").value(summary.longest_loss_s);
   json.key("tracking_lost_at_end").value(summary.tracking_lost_at_end);

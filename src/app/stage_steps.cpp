@@ -97,6 +97,9 @@ std::optional<TrackedPacket> TrackingStep::process(CapturePacket packet) {
     implausible_estimates_.fetch_add(
         static_cast<std::uint64_t>(out.odometry->stats.implausible_estimates),
         std::memory_order_relaxed);
+    prior_disagreements_.fetch_add(
+        static_cast<std::uint64_t>(out.odometry->stats.prior_disagreements),
+        std::memory_order_relaxed);
     if (out.odometry->stats.used_dense_alignment) {
       dense_aligned_frames_.fetch_add(1, std::memory_order_relaxed);
     }

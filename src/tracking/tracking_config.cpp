@@ -93,6 +93,16 @@ const ConfigSchema<TrackingConfig>& TrackingConfig::schema() {
               "after the keyframe; 0 = the keyframe alone; -1 = 2 for orb and sift, 0 for fovis")
           .number("joint_max_matches", &C::joint_max_matches, 10, 10000, "",
                   "matches used per extra reference in the joint refinement")
+          .flag("local_map", &C::local_map,
+                "after the keyframe, search the landmarks of covisible keyframes by projection "
+                "(ratio test in the window, scale and orientation consistency, reprojection "
+                "check) and refine the pose against all of them; replaces joint_references")
+          .number("local_map_keyframes", &C::local_map_keyframes, 1, 100, "keyframes",
+                  "covisible keyframes (of the last keyframe_window) whose landmarks are searched")
+          .number("local_map_min_shared", &C::local_map_min_shared, 1, 1000, "landmarks",
+                  "landmarks a keyframe must share with the current keyframe to be covisible")
+          .number("local_map_max_matches", &C::local_map_max_matches, 10, 10000, "",
+                  "local map matches kept for patch alignment and refinement (spread evenly)")
           .number("fovis_levels", &C::fovis_levels, 1, 5, "", "FOVIS pyramid levels")
           .number("fovis_fast_threshold", &C::fovis_fast_threshold, 5, 100, "grey levels",
                   "initial FAST threshold, adapted each frame towards max_features")
@@ -134,12 +144,17 @@ const ConfigSchema<TrackingConfig>& TrackingConfig::schema() {
                   "finest pyramid level aligned (0 = full resolution, 1 = half); < dense_levels")
           .number("dense_min_gradient", &C::dense_min_gradient, 0.0, 255.0, "grey levels/px",
                   "pixels with a weaker image gradient carry no photometric residual")
-          .number("dense_prior_sigma_mps", &C::dense_prior_sigma_mps, 0.001, 100.0, "m/s",
+          .number("motion_prior_sigma_mps", &C::motion_prior_sigma_mps, 0.001, 100.0, "m/s",
                   "uncertainty of the constant-velocity prior's speed: the prior's translation "
-                  "sigma is this times the time since the reference frame. A direction the scene "
-                  "leaves free (along a plain corridor) keeps the prior and this uncertainty")
-          .number("dense_prior_sigma_degps", &C::dense_prior_sigma_degps, 0.01, 10000.0, "deg/s",
-                  "the same for the rotation rate");
+                  "sigma is this times the time since the last measured frame. Dense alignment's "
+                  "prior (a direction the scene leaves free, along a plain corridor, keeps the "
+                  "prior and this uncertainty) and the disagreement gate's")
+          .number("motion_prior_sigma_degps", &C::motion_prior_sigma_degps, 0.01, 10000.0, "deg/s",
+                  "the same for the rotation rate")
+          .number("motion_prior_gate_sigma", &C::motion_prior_gate_sigma, 0.0, 1000.0, "sigma",
+                  "a feature estimate further than this from the constant-velocity prediction "
+                  "(Mahalanobis distance, prior and estimate covariance combined) is rejected and "
+                  "tracking retried, as for the motion limits; 0 = off");
   return table;
 }
 

@@ -1,9 +1,12 @@
 #include "slamd/tracking/visual_odometry.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 #include <optional>
+#include <unordered_map>
+#include <unordered_set>
 
 #include <opencv2/imgproc.hpp>
 
@@ -55,6 +58,30 @@ int markInliers(const std::vector<Correspondence>& matches, const CameraIntrinsi
     }
   }
   return count;
+}
+
+/// Keeps at most cap elements, spread evenly over the vector (a bound on later per-item cost).
+template <typename T>
+void keepEvenSample(std::vector<T>& items, std::size_t cap) {
+  if (items.size() <= cap) return;
+  std::vector<T> kept;
+  kept.reserve(cap);
+  for (std::size_t i = 0; i < cap; ++i) kept.push_back(items[i * items.size() / cap]);
+  items.swap(kept);
+}
+
+/// Robust refinement over the flagged correspondences, the inliers re-marked at its result, and
+/// refined again on those.
+RefinementResult refineAndRemark(const std::vector<Correspondence>& matches,
+                                 std::vector<std::uint8_t>& use, const CameraIntrinsics& K,
+                                 const SE3& T_initial, const TrackingConfig& config) {
+  const RefinementOptions options = refinementOptions(config);
+  RefinementResult refined = refinePose(matches, use, K, T_initial, options);
+  if (refined.success) {
+    markInliers(matches, K, refined.T_ref_curr, config.inlier_threshold_px, use);
+    refined = refinePose(matches, use, K, refined.T_ref_curr, options);
+  }
+  return refined;
 }
 
 }  // namespace
@@ -135,6 +162,7 @@ DenseAlignmentOptions denseOptions(const TrackingConfig& config) {
 VisualOdometry::VisualOdometry(const TrackingConfig& config)
     : config_(config),
       extractor_(makeFeatureExtractor(config)),
+      local_map_(config.depth_sigma_coeff),
       dense_options_(denseOptions(config)) {}
 
 VisualOdometry::~VisualOdometry() = default;
@@ -143,6 +171,7 @@ void VisualOdometry::reset() {
   state_ = TrackingState::kNotInitialized;
   keyframe_.reset();
   recent_keyframes_.clear();
+  local_map_.clear();
   prev_features_.reset();
   prev_tracked_ = false;
   T_world_prev_ = SE3::Identity();
@@ -188,7 +217,8 @@ OdometryResult VisualOdometry::guardedProcess(const RgbdFrame& frame,
 
 void VisualOdometry::matchGuided(const FeatureSet& ref, const SE3& T_ref_curr_prior,
                                  const CurrentFrame& curr, double radius_px,
-                                 std::vector<Correspondence>& matches) const {
+                                 std::vector<Correspondence>& matches,
+                                 const std::vector<std::uint8_t>* ref_mask) const {
   matches.clear();
   const FeatureSet& cf = *curr.features;
   if (ref.descriptors.empty() || cf.descriptors.empty() ||
@@ -206,7 +236,7 @@ void VisualOdometry::matchGuided(const FeatureSet& ref, const SE3& T_ref_curr_pr
   // Best match per current feature: (distance, index into matches).
   std::vector<std::pair<int, int>> owner(cf.size(), {std::numeric_limits<int>::max(), -1});
   for (std::size_t i = 0; i < ref.size(); ++i) {
-    if (!ref.hasDepth(i)) continue;
+    if (!ref.hasDepth(i) || (ref_mask != nullptr && !(*ref_mask)[i])) continue;
     const Eigen::Vector3d q = T_curr_ref * ref.points[i];
     if (q.z() <= 0.05) continue;
     const Eigen::Vector2d uv = K.project(q);
@@ -475,13 +505,7 @@ void VisualOdometry::refineWithExtraReferences(const SE3& T_world_ref,
     std::vector<Correspondence> matches;
     matchGuided(*extra.features, T_extra_curr, curr, config_.refine_search_radius_px, matches);
     // A sample spread over the match list bounds the cost (patch alignment dominates it).
-    const std::size_t cap = static_cast<std::size_t>(config_.joint_max_matches);
-    if (matches.size() > cap) {
-      std::vector<Correspondence> kept;
-      kept.reserve(cap);
-      for (std::size_t i = 0; i < cap; ++i) kept.push_back(matches[i * matches.size() / cap]);
-      matches.swap(kept);
-    }
+    keepEvenSample(matches, static_cast<std::size_t>(config_.joint_max_matches));
     std::vector<std::uint8_t> inliers;
     markInliers(matches, K, T_extra_curr, config_.inlier_threshold_px, inliers);
     if (config_.patch_refinement) {
@@ -500,12 +524,7 @@ void VisualOdometry::refineWithExtraReferences(const SE3& T_world_ref,
   attempt.time_matching_ms += msSince(t0);
   t0 = steadyNowNs();
   if (all.size() > own) {
-    const RefinementOptions options = refinementOptions(config_);
-    RefinementResult refined = refinePose(all, use, K, attempt.T_ref_curr, options);
-    if (refined.success) {
-      markInliers(all, K, refined.T_ref_curr, config_.inlier_threshold_px, use);
-      refined = refinePose(all, use, K, refined.T_ref_curr, options);
-    }
+    const RefinementResult refined = refineAndRemark(all, use, K, attempt.T_ref_curr, config_);
     // The covariance stays the main reference's own (the extra references' poses are uncertain
     // too); only the estimate moves.
     if (refined.success) attempt.T_ref_curr = refined.T_ref_curr;
@@ -765,6 +784,8 @@ OdometryResult VisualOdometry::startSegment(OdometryResult res, const CurrentFra
   keyframe_ = makeKeyframe(curr, frame, frame_ptr, T_world_curr);
   recent_keyframes_.clear();
   recent_keyframes_.push_back(keyframe_);
+  local_map_.clear();
+  local_map_.addKeyframe(keyframe_, {});
   res.status = OdometryStatus::kOk;
   res.tracking_state = TrackingState::kOk;
   res.T_world_camera = T_world_curr;
@@ -804,11 +825,47 @@ std::string VisualOdometry::implausibility(const SE3& T_world_curr, const Matrix
                                          translation_sigma_m, rotation_sigma_rad);
 }
 
+Matrix6d VisualOdometry::motionPriorCovariance(double interval_s) const {
+  const double sigma_m = config_.motion_prior_sigma_mps * interval_s;
+  const double sigma_rad = config_.motion_prior_sigma_degps * M_PI / 180.0 * interval_s;
+  Vector6d variance;
+  variance << Eigen::Vector3d::Constant(sigma_m * sigma_m),
+      Eigen::Vector3d::Constant(sigma_rad * sigma_rad);
+  return variance.asDiagonal();
+}
+
+bool VisualOdometry::disagreesWithPrior(const SE3& T_world_curr, const Matrix6d& covariance,
+                                        const SE3& T_world_pred, double dt_s) const {
+  if (config_.motion_prior_gate_sigma <= 0.0 || !have_velocity_) return false;
+  // Both covariances are of a perturbation on the right (the current camera's frame); the
+  // prior's is isotropic, so the frame it is expressed in does not matter.
+  const Vector6d error = logSE3(T_world_pred.inverse() * T_world_curr);
+  const Matrix6d combined =
+      motionPriorCovariance(std::max(dt_s, MotionLimits::kMinIntervalS)) + covariance;
+  const double mahalanobis_squared = error.dot(combined.ldlt().solve(error));
+  const double gate = config_.motion_prior_gate_sigma;
+  return !std::isfinite(mahalanobis_squared) || mahalanobis_squared > gate * gate;
+}
+
+bool VisualOdometry::rejected(const SE3& T_world_curr, const Matrix6d& covariance,
+                              const SE3& T_world_pred, double dt_s, OdometryStats& stats) const {
+  if (!implausibility(T_world_curr, covariance, dt_s).empty()) {
+    ++stats.implausible_estimates;
+    return true;
+  }
+  if (disagreesWithPrior(T_world_curr, covariance, T_world_pred, dt_s)) {
+    ++stats.prior_disagreements;
+    return true;
+  }
+  return false;
+}
+
 VisualOdometry::ReferenceMeasurement VisualOdometry::measureAgainstReference(
     const SE3& T_world_pred, const CurrentFrame& curr, double dt_s, OdometryStats& stats) {
   // Each reference (the keyframe, then the previous frame) is measured as usual; an estimate
-  // the camera cannot have made is vetoed and that reference retried with guided search only,
-  // in a window twice as wide (whole-image matching is what repeating patterns fool).
+  // the camera cannot have made, or one far from the prediction, is vetoed and that reference
+  // retried with guided search only, in a window twice as wide (whole-image matching is what
+  // repeating patterns fool).
   ReferenceMeasurement m;
   double matching_ms = 0.0;
   double motion_ms = 0.0;
@@ -820,8 +877,7 @@ VisualOdometry::ReferenceMeasurement VisualOdometry::measureAgainstReference(
       matching_ms += a.time_matching_ms;
       motion_ms += a.time_motion_ms;
       if (a.status != OdometryStatus::kOk) return a;
-      if (implausibility(T_world_ref * a.T_ref_curr, a.covariance, dt_s).empty()) return a;
-      ++stats.implausible_estimates;
+      if (!rejected(T_world_ref * a.T_ref_curr, a.covariance, T_world_pred, dt_s, stats)) return a;
       vetoed = true;
       a.status = OdometryStatus::kImplausibleMotion;
       if (retry == 0) a = track(ref, prior, true, curr, Search(false, 2.0));
@@ -938,6 +994,194 @@ void VisualOdometry::refineInLocalWindow(const CurrentFrame& curr, TrackAttempt&
   T_world_curr = normalizedSE3(keyframe_->T_world_camera * attempt.T_ref_curr);
 }
 
+void VisualOdometry::associateWithKeyframe(const TrackAttempt& attempt, const Keyframe& kf) {
+  if (!local_map_.hasKeyframe(kf.id)) return;
+  const std::vector<std::int64_t>& landmarks = local_map_.landmarksOf(kf.id);
+  for (std::size_t k = 0; k < attempt.matches.size(); ++k) {
+    const Correspondence& c = attempt.matches[k];
+    if (!attempt.inliers[k] || c.ref_index < 0 || c.curr_index < 0) continue;
+    const std::size_t curr_index = static_cast<std::size_t>(c.curr_index);
+    if (curr_index >= curr_landmarks_.size()) curr_landmarks_.resize(curr_index + 1, -1);
+    curr_landmarks_[curr_index] = landmarks[static_cast<std::size_t>(c.ref_index)];
+  }
+}
+
+void VisualOdometry::trackLocalMap(const CurrentFrame& curr, const SE3& T_world_ref,
+                                   bool keyframe_is_reference, TrackAttempt& attempt,
+                                   SE3& T_world_curr, OdometryResult& res) {
+  if (!local_map_.hasKeyframe(keyframe_->id)) return;
+  const std::int64_t t0 = steadyNowNs();
+  const FeatureSet& cf = *curr.features;
+  // The landmarks to search: those of the keyframes covisible with the keyframe, and of the
+  // keyframe itself unless the attempt already measured against it. Each is searched through its
+  // representative view (the latest keyframe that observed it): that keyframe's descriptor,
+  // scale, orientation and patch.
+  std::vector<std::int64_t> sources = local_map_.covisibleKeyframes(
+      keyframe_->id, config_.local_map_min_shared, config_.local_map_keyframes);
+  if (!keyframe_is_reference) sources.push_back(keyframe_->id);
+  std::unordered_set<std::int64_t> excluded;
+  if (keyframe_is_reference) {
+    for (std::int64_t id : local_map_.landmarksOf(keyframe_->id)) excluded.insert(id);
+  }
+  struct Group {
+    const Keyframe* kf = nullptr;
+    std::vector<std::uint8_t> mask;
+    std::vector<std::int64_t> landmark_of_feature;
+  };
+  std::unordered_map<std::int64_t, Group> groups;
+  std::unordered_set<std::int64_t> searched;
+  for (std::int64_t source : sources) {
+    for (std::int64_t id : local_map_.landmarksOf(source)) {
+      if (id < 0 || excluded.count(id) != 0 || !searched.insert(id).second) continue;
+      const MapLandmark* landmark = local_map_.landmark(id);
+      if (landmark == nullptr) continue;
+      const MapLandmark::Observation& view = landmark->representative();
+      Group& group = groups[view.keyframe_id];
+      if (group.kf == nullptr) {
+        group.kf = &local_map_.keyframe(view.keyframe_id);
+        group.mask.assign(group.kf->features.size(), 0);
+        group.landmark_of_feature.assign(group.kf->features.size(), -1);
+      }
+      const std::size_t f = static_cast<std::size_t>(view.feature_index);
+      group.mask[f] = 1;
+      group.landmark_of_feature[f] = id;
+    }
+  }
+  res.stats.local_map_landmarks = static_cast<int>(searched.size());
+  if (groups.empty()) return;
+
+  // Search by projection around the current estimate: ratio test within the window and scale
+  // consistency (matchGuided); the points are the landmarks' fused positions.
+  struct Candidate {
+    Correspondence match;
+    std::int64_t landmark_id = -1;
+    const Group* group = nullptr;
+  };
+  std::vector<Candidate> candidates;
+  std::vector<std::uint8_t> curr_taken(cf.size(), 0);
+  for (std::size_t k = 0; k < attempt.matches.size(); ++k) {
+    if (attempt.inliers[k] && attempt.matches[k].curr_index >= 0) {
+      curr_taken[static_cast<std::size_t>(attempt.matches[k].curr_index)] = 1;
+    }
+  }
+  for (const auto& [kf_id, group] : groups) {
+    const SE3 T_world_kf = group.kf->T_world_camera;
+    const SE3 T_kf_world = T_world_kf.inverse();
+    std::vector<Correspondence> matches;
+    matchGuided(group.kf->features, T_kf_world * T_world_curr, curr,
+                config_.refine_search_radius_px, matches, &group.mask);
+    for (Correspondence& c : matches) {
+      const std::int64_t id = group.landmark_of_feature[static_cast<std::size_t>(c.ref_index)];
+      c.point_ref = T_kf_world * local_map_.landmark(id)->p_world;
+      candidates.push_back({c, id, &group});
+    }
+  }
+  // Orientation consistency (ORB, SIFT): the change of keypoint angle between the two views is
+  // nearly the same for every true match, the camera's roll; matches outside the three most
+  // common 12-degree bins are dropped.
+  if (extractor_->norm() != DescriptorNorm::kSad && candidates.size() >= 10) {
+    constexpr int kBins = 30;
+    std::vector<int> bin_of(candidates.size(), -1);
+    std::array<int, kBins> histogram{};
+    for (std::size_t k = 0; k < candidates.size(); ++k) {
+      const Candidate& cand = candidates[k];
+      const float a_ref =
+          cand.group->kf->features.keypoints[static_cast<std::size_t>(cand.match.ref_index)].angle;
+      const float a_curr = cf.keypoints[static_cast<std::size_t>(cand.match.curr_index)].angle;
+      if (a_ref < 0.0f || a_curr < 0.0f) continue;
+      double difference = static_cast<double>(a_curr - a_ref);
+      if (difference < 0.0) difference += 360.0;
+      bin_of[k] = std::min(kBins - 1, static_cast<int>(difference / (360.0 / kBins)));
+      ++histogram[static_cast<std::size_t>(bin_of[k])];
+    }
+    std::array<int, kBins> order{};
+    for (int b = 0; b < kBins; ++b) order[static_cast<std::size_t>(b)] = b;
+    std::partial_sort(order.begin(), order.begin() + 3, order.end(), [&](int a, int b) {
+      return histogram[static_cast<std::size_t>(a)] > histogram[static_cast<std::size_t>(b)];
+    });
+    std::vector<Candidate> consistent;
+    for (std::size_t k = 0; k < candidates.size(); ++k) {
+      const int b = bin_of[k];
+      if (b < 0 || b == order[0] || b == order[1] || b == order[2]) {
+        consistent.push_back(candidates[k]);
+      }
+    }
+    candidates.swap(consistent);
+  }
+  // One landmark per current feature, none that the attempt already holds; then an even sample
+  // bounds the cost of patch alignment.
+  std::vector<Candidate> unique;
+  for (const Candidate& cand : candidates) {
+    std::uint8_t& taken = curr_taken[static_cast<std::size_t>(cand.match.curr_index)];
+    if (taken) continue;
+    taken = 1;
+    unique.push_back(cand);
+  }
+  keepEvenSample(unique, static_cast<std::size_t>(config_.local_map_max_matches));
+  // Geometric verification per source view (reprojection at the estimate), sub-pixel patch
+  // alignment against that view, verification again; the survivors join the attempt's inliers
+  // in the world frame.
+  std::vector<Correspondence> all;
+  std::vector<std::uint8_t> use;
+  all.reserve(attempt.matches.size() + unique.size());
+  for (std::size_t k = 0; k < attempt.matches.size(); ++k) {
+    Correspondence c = attempt.matches[k];
+    c.point_ref = T_world_ref * c.point_ref;
+    all.push_back(c);
+    use.push_back(attempt.inliers[k]);
+  }
+  const std::size_t own = all.size();
+  std::vector<std::int64_t> landmark_of_match;
+  const CameraIntrinsics& K = curr.K;
+  for (const auto& [kf_id, group] : groups) {
+    std::vector<Correspondence> matches;
+    std::vector<std::int64_t> ids;
+    for (const Candidate& cand : unique) {
+      if (cand.group != &group) continue;
+      matches.push_back(cand.match);
+      ids.push_back(cand.landmark_id);
+    }
+    if (matches.empty()) continue;
+    const SE3 T_kf_curr = group.kf->T_world_camera.inverse() * T_world_curr;
+    std::vector<std::uint8_t> inliers;
+    markInliers(matches, K, T_kf_curr, config_.inlier_threshold_px, inliers);
+    if (config_.patch_refinement) {
+      alignInlierPatches(group.kf->features, T_kf_curr, curr, matches, inliers);
+      markInliers(matches, K, T_kf_curr, config_.inlier_threshold_px, inliers);
+    }
+    for (std::size_t i = 0; i < matches.size(); ++i) {
+      if (!inliers[i]) continue;
+      Correspondence c = matches[i];
+      c.point_ref = group.kf->T_world_camera * c.point_ref;
+      all.push_back(c);
+      use.push_back(1);
+      landmark_of_match.push_back(ids[i]);
+    }
+  }
+  attempt.time_matching_ms += msSince(t0);
+  res.stats.time_matching_ms += msSince(t0);
+  if (all.size() == own) return;
+  const std::int64_t t1 = steadyNowNs();
+  const RefinementResult refined = refineAndRemark(all, use, K, T_world_curr, config_);
+  const double motion_ms = msSince(t1);
+  attempt.time_motion_ms += motion_ms;
+  res.stats.time_motion_ms += motion_ms;
+  if (!refined.success) return;
+  // The covariance stays the reference's own (the landmarks' positions are uncertain too); the
+  // estimate moves.
+  T_world_curr = normalizedSE3(refined.T_ref_curr);
+  attempt.T_ref_curr = normalizedSE3(T_world_ref.inverse() * T_world_curr);
+  res.T_ref_curr = attempt.T_ref_curr;
+  if (curr_landmarks_.size() < cf.size()) curr_landmarks_.resize(cf.size(), -1);
+  int local_inliers = 0;
+  for (std::size_t k = own; k < all.size(); ++k) {
+    if (!use[k]) continue;
+    ++local_inliers;
+    curr_landmarks_[static_cast<std::size_t>(all[k].curr_index)] = landmark_of_match[k - own];
+  }
+  res.stats.local_map_inliers = local_inliers;
+}
+
 void VisualOdometry::addKeyframe(const CurrentFrame& curr, const RgbdFrame& frame,
                                  const RgbdFramePtr& frame_ptr, const SE3& T_world_curr,
                                  OdometryResult& res) {
@@ -945,7 +1189,9 @@ void VisualOdometry::addKeyframe(const CurrentFrame& curr, const RgbdFrame& fram
   res.is_keyframe = true;
   res.keyframe = keyframe_;
   recent_keyframes_.push_back(keyframe_);
+  local_map_.addKeyframe(keyframe_, curr_landmarks_);
   while (static_cast<int>(recent_keyframes_.size()) > config_.keyframe_window) {
+    local_map_.removeKeyframe(recent_keyframes_.front()->id);
     recent_keyframes_.pop_front();
   }
 }
@@ -959,6 +1205,7 @@ OdometryResult VisualOdometry::process(const RgbdFrame& frame, const RgbdFramePt
 
   CurrentFrame curr;
   cv::Mat small;
+  curr_landmarks_.clear();
   if (const auto failure = prepareFrame(frame, frame_ptr, curr, small, res.stats)) {
     if (!curr.features || !keyframe_) {
       if (curr.features) prev_small_ = small;
@@ -1011,16 +1258,21 @@ OdometryResult VisualOdometry::process(const RgbdFrame& frame, const RgbdFramePt
   SE3 T_world_curr = normalizedSE3(measured.T_world_ref * attempt.T_ref_curr);
   bool new_keyframe = measured.from_previous ||
                       needsNewKeyframe(attempt, *keyframe_, curr.features->num_with_depth);
+  bool keyframe_is_reference = !measured.from_previous;
   if (new_keyframe && config_.keyframe_window > 1 &&
       reuseRecentKeyframe(curr, attempt, T_world_curr, res)) {
     new_keyframe = false;
+    keyframe_is_reference = true;
   }
-  if (!measured.from_previous && config_.jointReferences() > 0) {
+  if (config_.local_map) {
+    if (keyframe_is_reference) associateWithKeyframe(attempt, *keyframe_);
+    trackLocalMap(curr, keyframe_is_reference ? keyframe_->T_world_camera : measured.T_world_ref,
+                  keyframe_is_reference, attempt, T_world_curr, res);
+  } else if (!measured.from_previous && config_.jointReferences() > 0) {
     refineInLocalWindow(curr, attempt, T_world_curr, res);
   }
   // Re-using another keyframe or refining can move the estimate: the veto holds for the result.
-  if (!implausibility(T_world_curr, attempt.covariance, dt_s).empty()) {
-    ++res.stats.implausible_estimates;
+  if (rejected(T_world_curr, attempt.covariance, T_world_pred, dt_s, res.stats)) {
     return fail(std::move(res), OdometryStatus::kImplausibleMotion, curr.features, t_start);
   }
   return acceptMeasurement(std::move(res), curr, frame, frame_ptr, T_world_curr, new_keyframe,
@@ -1099,15 +1351,10 @@ bool VisualOdometry::measureDense(CurrentFrame& curr, const SE3& T_world_pred, O
   // speed and turn rate over the interval allows.
   const double interval_s =
       std::max(static_cast<double>(curr.utime - dense_reference_.utime) * 1e-6, 1e-3);
-  const double sigma_m = config_.dense_prior_sigma_mps * interval_s;
-  const double sigma_rad = config_.dense_prior_sigma_degps * M_PI / 180.0 * interval_s;
-  Vector6d prior_variance;
-  prior_variance << Eigen::Vector3d::Constant(sigma_m * sigma_m),
-      Eigen::Vector3d::Constant(sigma_rad * sigma_rad);
   const SE3& T_world_ref = dense_reference_.T_world_camera;
   const DenseAlignmentResult dense =
       alignDense(*dense_reference_.pyramid, *curr.pyramid, T_world_ref.inverse() * T_world_pred,
-                 Matrix6d(prior_variance.asDiagonal()), dense_options_);
+                 motionPriorCovariance(interval_s), dense_options_);
   res.stats.time_dense_ms = msSince(t0);
   if (!dense.success) return false;
   T_world_curr = normalizedSE3(T_world_ref * dense.T_ref_curr);

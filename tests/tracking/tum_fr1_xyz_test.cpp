@@ -19,14 +19,16 @@ struct RunResult {
   double rpe_rmse_m = 0.0;  ///< translation, 1 s
   int frames = 0;
   int failures = 0;
+  int frames_with_local_map_inliers = 0;
 };
 
 /// Runs the front end over the first max_frames frames (0 = all).
-RunResult runFirstFrames(FrontEndType frontend, int max_frames) {
+RunResult runFirstFrames(FrontEndType frontend, int max_frames, bool local_map = true) {
   const auto folder = test::findDataset("tum_fr1_xyz");
   Config config = Config::fromFile(std::string(SLAMD_SOURCE_DIR) + "/config/tum_fr1.yaml");
   TrackingConfig tracking = TrackingConfig::load(config);
   tracking.frontend = frontend;
+  tracking.local_map = local_map;
   TumSource source(folder->string(), TumSourceConfig::load(config));
   source.open();
   VisualOdometry vo(tracking);
@@ -39,6 +41,7 @@ RunResult runFirstFrames(FrontEndType frontend, int max_frames) {
     const OdometryResult r = vo.processFrame(read.frame);
     ++result.frames;
     if (r.status != OdometryStatus::kOk) ++result.failures;
+    if (r.stats.local_map_inliers > 0) ++result.frames_with_local_map_inliers;
     estimate.push_back({utimeToSeconds(r.utime), r.T_world_camera});
   }
   result.ate_rmse_m = eval::computeAte(*source.groundTruth(), estimate).translation_m.rmse;
@@ -73,6 +76,22 @@ TEST(TumFr1Xyz, OrbMeetsTheAccuracyTargetsOnTheWholeSequence) {
   EXPECT_LT(r.rpe_rmse_m, 0.02);
   RecordProperty("ate_rmse_m", std::to_string(r.ate_rmse_m));
   RecordProperty("rpe_rmse_m", std::to_string(r.rpe_rmse_m));
+}
+
+TEST(TumFr1Xyz, TrackingAgainstTheLocalMapLowersTheError) {
+  // Measured: ATE 0.0108 m with the local map, 0.0131 m against the keyframe and the two most
+  // recent others (joint_references); RPE(1 s) 0.0153 and 0.0163 m.
+  if (!test::findDataset("tum_fr1_xyz")) GTEST_SKIP() << test::missingDataMessage("tum_fr1_xyz");
+  const RunResult with_map = runFirstFrames(FrontEndType::kOrb, 0, true);
+  const RunResult without = runFirstFrames(FrontEndType::kOrb, 0, false);
+  EXPECT_EQ(with_map.failures, 0);
+  EXPECT_GT(with_map.frames_with_local_map_inliers, with_map.frames / 2);
+  EXPECT_EQ(without.frames_with_local_map_inliers, 0);
+  EXPECT_LT(with_map.ate_rmse_m, 0.012);
+  EXPECT_LT(with_map.ate_rmse_m, without.ate_rmse_m);
+  EXPECT_LT(with_map.rpe_rmse_m, without.rpe_rmse_m);
+  RecordProperty("ate_rmse_m", std::to_string(with_map.ate_rmse_m));
+  RecordProperty("ate_rmse_m_without_local_map", std::to_string(without.ate_rmse_m));
 }
 
 }  // namespace

@@ -239,16 +239,14 @@ TEST(VisualOdometry, DenseAlignmentMeasuresFramesFeaturesCannot) {
   EXPECT_FALSE(r.stats.used_dense_alignment);
 }
 
-/// Tracks frames 0..9 of trajectoryPose(), then frame 10 with the camera rolled by 180 deg about
-/// its optical axis (the view a repeating pattern can fake), then frames 11 and 12 unrolled.
-std::vector<OdometryResult> trackWithAFlip(const TrackingConfig& config) {
+/// Tracks frames 0..9 of trajectoryPose(), then frame 10 with the camera moved by jump (in its
+/// own frame), then frames 11 and 12 back on the trajectory.
+std::vector<OdometryResult> trackWithAJump(const TrackingConfig& config, const SE3& jump) {
   VisualOdometry vo(config);
   const test::TexturedBox box({-2, -1.5, -1}, {2, 1.5, 3}, 42);
-  SE3 roll = SE3::Identity();
-  roll.linear() = expSO3(Eigen::Vector3d(0.0, 0.0, M_PI));
   std::vector<OdometryResult> results;
   for (int i = 0; i <= 12; ++i) {
-    const SE3 T_world_camera = i == 10 ? trajectoryPose(i) * roll : trajectoryPose(i);
+    const SE3 T_world_camera = i == 10 ? trajectoryPose(i) * jump : trajectoryPose(i);
     RgbdFrame frame = box.render(T_world_camera, test::fr1Camera());
     frame.utime = 1'000'000 + i * 33'333;
     frame.sequence = i;
@@ -257,12 +255,21 @@ std::vector<OdometryResult> trackWithAFlip(const TrackingConfig& config) {
   return results;
 }
 
+/// A roll by 180 deg about the optical axis at frame 10: the view a repeating pattern can fake.
+std::vector<OdometryResult> trackWithAFlip(const TrackingConfig& config) {
+  SE3 roll = SE3::Identity();
+  roll.linear() = expSO3(Eigen::Vector3d(0.0, 0.0, M_PI));
+  return trackWithAJump(config, roll);
+}
+
 TEST(VisualOdometry, AFlipBeyondTheMotionLimitsIsVetoedAndPredicted) {
-  // Without limits (100 rad/s allows any rotation in a frame period) the flip is measured: the
-  // scene does fool the tracker, so the check below can fail.
+  // Without limits (100 rad/s allows any rotation in a frame period) and without the motion
+  // prior's gate the flip is measured: the scene does fool the tracker, so the check below can
+  // fail. (The gate alone rejects it too: 180 deg is 90 sigma of the default prior.)
   TrackingConfig unlimited;
   unlimited.motion_limits.max_angular_rate_radps = 100.0;
   unlimited.motion_limits.max_speed_mps = 100.0;
+  unlimited.motion_prior_gate_sigma = 0.0;
   const std::vector<OdometryResult> fooled = trackWithAFlip(unlimited);
   ASSERT_EQ(fooled[10].status, OdometryStatus::kOk);
   EXPECT_GT(rotationAngleRad(fooled[10].T_prev_curr.linear()), 3.0);
@@ -285,6 +292,59 @@ TEST(VisualOdometry, AFlipBeyondTheMotionLimitsIsVetoedAndPredicted) {
         << i;
   }
   EXPECT_STREQ(odometryStatusName(OdometryStatus::kImplausibleMotion), "IMPLAUSIBLE_MOTION");
+}
+
+TEST(VisualOdometry, AnEstimateFarFromThePredictionIsRejectedAndPredicted) {
+  // A 5 cm sideways jump within one frame period (1.5 m/s, within the 3 m/s limit) while the
+  // camera moves at about 0.4 m/s: 2.5 sigma from the prediction with the default prior (0.6 m/s
+  // of speed change), which accepts it; 15 sigma with a prior of 0.1 m/s, which rejects it.
+  SE3 jump = SE3::Identity();
+  jump.translation() = Eigen::Vector3d(0.05, 0.0, 0.0);
+  const std::vector<OdometryResult> loose = trackWithAJump(TrackingConfig(), jump);
+  ASSERT_EQ(loose[10].status, OdometryStatus::kOk);
+  EXPECT_EQ(loose[10].stats.prior_disagreements, 0);
+  EXPECT_LT(
+      (loose[10].T_world_camera.translation() - (trajectoryPose(10) * jump).translation()).norm(),
+      0.002);
+
+  // Without dense alignment, a rejected frame is predicted.
+  TrackingConfig tight;
+  tight.motion_prior_sigma_mps = 0.1;
+  tight.dense_fallback = false;
+  tight.motion_prior_gate_sigma = 0.0;  // gate off: the jump is measured
+  const std::vector<OdometryResult> ungated = trackWithAJump(tight, jump);
+  ASSERT_EQ(ungated[10].status, OdometryStatus::kOk);
+  EXPECT_FALSE(ungated[10].stats.used_dense_alignment);
+
+  tight.motion_prior_gate_sigma = 6.0;
+  const std::vector<OdometryResult> results = trackWithAJump(tight, jump);
+  for (int i = 0; i < 10; ++i) {
+    ASSERT_EQ(results[i].status, OdometryStatus::kOk) << i;
+    EXPECT_EQ(results[i].stats.prior_disagreements, 0) << i;
+  }
+  const OdometryResult& rejected = results[10];
+  EXPECT_EQ(rejected.status, OdometryStatus::kImplausibleMotion);
+  EXPECT_EQ(rejected.tracking_state, TrackingState::kPredicted);
+  EXPECT_GE(rejected.stats.prior_disagreements, 1);
+  EXPECT_EQ(rejected.stats.implausible_estimates, 0);
+  EXPECT_LT((rejected.T_world_camera.translation() - trajectoryPose(10).translation()).norm(),
+            0.01);
+  for (int i = 11; i <= 12; ++i) {
+    EXPECT_EQ(results[i].status, OdometryStatus::kOk) << i;
+    EXPECT_LT((results[i].T_world_camera.translation() - trajectoryPose(i).translation()).norm(),
+              0.005)
+        << i;
+  }
+
+  // With dense alignment (the default), the rejected frame is retried with it: the images,
+  // weighed against the prior, measure the jump.
+  tight.dense_fallback = true;
+  const OdometryResult dense = trackWithAJump(tight, jump)[10];
+  EXPECT_GE(dense.stats.prior_disagreements, 1);
+  ASSERT_EQ(dense.status, OdometryStatus::kOk);
+  EXPECT_TRUE(dense.stats.used_dense_alignment);
+  EXPECT_LT((dense.T_world_camera.translation() - (trajectoryPose(10) * jump).translation()).norm(),
+            0.005);
 }
 
 TEST(MotionLimits, ViolationsNameTheLimitAndNoiseWidensThem) {

@@ -59,6 +59,7 @@ struct DaemonSummary {
   std::uint64_t poses_not_initialized = 0;
   /// Motion estimates vetoed as beyond the camera's motion limits (then retried or predicted).
   std::uint64_t implausible_estimates = 0;
+  std::uint64_t prior_disagreements = 0;  ///< estimates rejected by the motion prior's gate
   /// Poses measured by dense alignment where features failed (part of poses_tracked).
   std::uint64_t dense_aligned_frames = 0;
   double longest_loss_s = 0.0;        ///< longest run of predicted or lost poses, frame time

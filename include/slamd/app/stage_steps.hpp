@@ -185,6 +185,10 @@ class TrackingStep : public StepBase {
   std::uint64_t implausibleEstimates() const {
     return implausible_estimates_.load(std::memory_order_relaxed);
   }
+  /// Motion estimates rejected as too far from the constant-velocity prediction (any thread).
+  std::uint64_t priorDisagreements() const {
+    return prior_disagreements_.load(std::memory_order_relaxed);
+  }
   /// Frames measured by dense alignment because features failed, so far (any thread).
   std::uint64_t denseAlignedFrames() const {
     return dense_aligned_frames_.load(std::memory_order_relaxed);
@@ -194,6 +198,7 @@ class TrackingStep : public StepBase {
   VisualOdometry odometry_;
   std::atomic<int> tracking_state_{static_cast<int>(TrackingState::kNotInitialized)};
   std::atomic<std::uint64_t> implausible_estimates_{0};
+  std::atomic<std::uint64_t> prior_disagreements_{0};
   std::atomic<std::uint64_t> dense_aligned_frames_{0};
 };
 

@@ -75,6 +75,14 @@ struct TrackingConfig {
   }
   int joint_max_matches = 150;
 
+  // --- Tracking against the local map (local_map.hpp) -----------------------------------------
+  /// After the keyframe, match the landmarks of covisible keyframes by projection and refine
+  /// against all of them (instead of joint_references whole keyframes).
+  bool local_map = true;
+  int local_map_keyframes = 10;   ///< covisible keyframes whose landmarks are searched
+  int local_map_min_shared = 10;  ///< landmarks a keyframe must share to be covisible
+  int local_map_max_matches = 300;
+
   // --- FOVIS front end ------------------------------------------------------------------------
   int fovis_levels = 3;
   int fovis_fast_threshold = 20;
@@ -101,8 +109,15 @@ struct TrackingConfig {
   int dense_levels = 4;
   int dense_finest_level = 1;
   double dense_min_gradient = 4.0;
-  double dense_prior_sigma_mps = 0.6;
-  double dense_prior_sigma_degps = 60.0;
+
+  // --- The motion prior: constant velocity, and how far a frame may depart from it -----------
+  /// 1-sigma change of speed (m/s) and turn rate (deg/s) between frames: the prior's sigmas are
+  /// these times the interval. Dense alignment's prior, and the disagreement gate's.
+  double motion_prior_sigma_mps = 0.6;
+  double motion_prior_sigma_degps = 60.0;
+  /// A feature estimate further than this (Mahalanobis distance, in sigmas, prior and estimate
+  /// covariance combined) from the constant-velocity prediction is rejected and retried; 0 = off.
+  double motion_prior_gate_sigma = 6.0;
 
   // --- Plausibility ---------------------------------------------------------------------------
   /// An estimate implying faster motion is vetoed and tracking retried. Not tracking.* keys:

@@ -38,6 +38,8 @@
 #include "slamd/common/se3.hpp"
 #include "slamd/tracking/dense_alignment.hpp"
 #include "slamd/tracking/features.hpp"
+#include "slamd/tracking/keyframe.hpp"
+#include "slamd/tracking/local_map.hpp"
 #include "slamd/tracking/motion_estimation.hpp"
 #include "slamd/tracking/tracking_config.hpp"
 
@@ -55,30 +57,6 @@ enum class OdometryStatus : std::int8_t {
 
 const char* odometryStatusName(OdometryStatus status);
 
-/// A keyframe: what mapping and the back end consume. Immutable once published.
-struct Keyframe {
-  std::int64_t id = 0;       ///< 0, 1, 2, ... across segments
-  std::int64_t segment = 0;  ///< tracking segment (incremented after LOST)
-  Utime utime = 0;           ///< capture time of the frame
-  std::int64_t frame_sequence = 0;
-  SE3 T_world_camera = SE3::Identity();  ///< odometry pose when the keyframe was made
-  CameraIntrinsics intrinsics;
-  FeatureSet features;  ///< keypoints, descriptors, undistorted pixels, 3D points (camera frame)
-  RgbdFramePtr frame;   ///< images (null when processFrame got a reference, not a pointer)
-  double median_depth_m = 0.0;  ///< median depth of the features with depth; 0 = none
-};
-using KeyframePtr = std::shared_ptr<const Keyframe>;
-
-/// What the back end keeps of a keyframe: a copy without the frame's images and without the
-/// grey image the features came from. Keypoints, descriptors, undistorted pixels, 3D points and
-/// poses stay; so does the smoothed grey image (features.align_gray) when keep_alignment_image
-/// (the back end aligns patches of it to make its edges sub-pixel: backend.align_patches).
-std::shared_ptr<Keyframe> compactKeyframe(const Keyframe& keyframe, bool keep_alignment_image);
-
-/// Bytes held by a keyframe's buffers: feature vectors, descriptors and images (a buffer that two
-/// fields share counted once).
-std::size_t keyframeBytes(const Keyframe& keyframe);
-
 struct OdometryStats {
   int num_features = 0;  ///< features detected in the current frame
   int num_features_with_depth = 0;
@@ -86,8 +64,11 @@ struct OdometryStats {
   int num_inliers = 0;                 ///< matches consistent with the estimated motion
   double reprojection_error_px = 0.0;  ///< RMS over the inliers
   bool used_guided_matching = false;
-  bool used_previous_frame = false;     ///< the keyframe failed; tracked from the previous frame
-  int implausible_estimates = 0;        ///< estimates vetoed by the motion limits (then retried)
+  bool used_previous_frame = false;  ///< the keyframe failed; tracked from the previous frame
+  int implausible_estimates = 0;     ///< estimates vetoed by the motion limits (then retried)
+  int prior_disagreements = 0;  ///< estimates rejected by the motion prior's gate (then retried)
+  int local_map_landmarks = 0;  ///< landmarks of covisible keyframes searched (local_map)
+  int local_map_inliers = 0;    ///< of those, matched and consistent with the pose
   bool used_dense_alignment = false;    ///< features failed; dense alignment measured the frame
   int dense_degenerate_directions = 0;  ///< directions dense alignment left to the motion prior
   double time_features_ms = 0.0;        ///< extraction + undistortion + depth
@@ -173,6 +154,16 @@ class VisualOdometry {
   /// earlier), given the estimate's covariance; else why not.
   std::string implausibility(const SE3& T_world_curr, const Matrix6d& covariance,
                              double dt_s) const;
+  /// The constant-velocity prior's covariance over interval_s (motion_prior_sigma_*).
+  Matrix6d motionPriorCovariance(double interval_s) const;
+  /// Whether a feature estimate lies further than tracking.motion_prior_gate_sigma from the
+  /// prediction T_world_pred made dt_s after the last measured frame (prior and estimate
+  /// covariance combined). False while no velocity is known.
+  bool disagreesWithPrior(const SE3& T_world_curr, const Matrix6d& covariance,
+                          const SE3& T_world_pred, double dt_s) const;
+  /// Counts a rejected estimate in stats; true if it was rejected (implausible or disagreeing).
+  bool rejected(const SE3& T_world_curr, const Matrix6d& covariance, const SE3& T_world_pred,
+                double dt_s, OdometryStats& stats) const;
   /// features_with_depth: the current frame's.
   bool needsNewKeyframe(const TrackAttempt& attempt, const Keyframe& kf,
                         int features_with_depth) const;
@@ -182,6 +173,14 @@ class VisualOdometry {
                            OdometryResult& res);
   void refineInLocalWindow(const CurrentFrame& curr, TrackAttempt& attempt, SE3& T_world_curr,
                            OdometryResult& res);
+  /// The landmarks of the keyframes covisible with the keyframe, searched by projection at
+  /// T_world_curr and refined jointly with the attempt (measured against T_world_ref; the
+  /// keyframe's own landmarks are left out when it is the reference). Updates attempt.T_ref_curr,
+  /// T_world_curr and the current frame's landmark associations.
+  void trackLocalMap(const CurrentFrame& curr, const SE3& T_world_ref, bool keyframe_is_reference,
+                     TrackAttempt& attempt, SE3& T_world_curr, OdometryResult& res);
+  /// Associates the attempt's inliers with the landmarks of the keyframe they were matched to.
+  void associateWithKeyframe(const TrackAttempt& attempt, const Keyframe& kf);
   void addKeyframe(const CurrentFrame& curr, const RgbdFrame& frame, const RgbdFramePtr& frame_ptr,
                    const SE3& T_world_curr, OdometryResult& res);
   /// Dense alignment of the current frame against the last measured frame with depth, when
@@ -203,8 +202,10 @@ class VisualOdometry {
   /// Every exit: the frame becomes the previous frame of the next call.
   OdometryResult commit(OdometryResult res, std::shared_ptr<const FeatureSet> features,
                         bool tracked, std::int64_t t_start);
+  /// ref_mask: when given, only the reference features it marks are matched.
   void matchGuided(const FeatureSet& ref, const SE3& T_ref_curr_prior, const CurrentFrame& curr,
-                   double radius_px, std::vector<Correspondence>& matches) const;
+                   double radius_px, std::vector<Correspondence>& matches,
+                   const std::vector<std::uint8_t>* ref_mask = nullptr) const;
   /// How track() searches: around the prior, falling back to whole-image descriptor matching
   /// when too few are found; or only around the prior, in a window wider by a factor.
   struct Search {
@@ -238,6 +239,11 @@ class VisualOdometry {
   TrackingState state_ = TrackingState::kNotInitialized;
   KeyframePtr keyframe_;
   std::deque<KeyframePtr> recent_keyframes_;  ///< the last keyframe_window keyframes (segment)
+  /// The landmarks of recent_keyframes_.
+  LocalMap local_map_;
+  /// The landmark each feature of the current frame was matched to (-1: none); the associations
+  /// a keyframe made of the frame takes into the local map.
+  std::vector<std::int64_t> curr_landmarks_;
   std::int64_t next_keyframe_id_ = 0;
   std::int64_t segment_ = 0;
 

@@ -1,0 +1,39 @@
+#pragma once
+// A keyframe of visual odometry: what tracking's local map, mapping and the back end consume.
+
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+
+#include "slamd/common/camera_intrinsics.hpp"
+#include "slamd/common/rgbd_frame.hpp"
+#include "slamd/common/se3.hpp"
+#include "slamd/tracking/features.hpp"
+
+namespace slamd {
+
+/// A keyframe: what mapping and the back end consume. Immutable once published.
+struct Keyframe {
+  std::int64_t id = 0;       ///< 0, 1, 2, ... across segments
+  std::int64_t segment = 0;  ///< tracking segment (incremented after LOST)
+  Utime utime = 0;           ///< capture time of the frame
+  std::int64_t frame_sequence = 0;
+  SE3 T_world_camera = SE3::Identity();  ///< odometry pose when the keyframe was made
+  CameraIntrinsics intrinsics;
+  FeatureSet features;  ///< keypoints, descriptors, undistorted pixels, 3D points (camera frame)
+  RgbdFramePtr frame;   ///< images (null when processFrame got a reference, not a pointer)
+  double median_depth_m = 0.0;  ///< median depth of the features with depth; 0 = none
+};
+using KeyframePtr = std::shared_ptr<const Keyframe>;
+
+/// What the back end keeps of a keyframe: a copy without the frame's images and without the
+/// grey image the features came from. Keypoints, descriptors, undistorted pixels, 3D points and
+/// poses stay; so does the smoothed grey image (features.align_gray) when keep_alignment_image
+/// (the back end aligns patches of it to make its edges sub-pixel: backend.align_patches).
+std::shared_ptr<Keyframe> compactKeyframe(const Keyframe& keyframe, bool keep_alignment_image);
+
+/// Bytes held by a keyframe's buffers: feature vectors, descriptors and images (a buffer that two
+/// fields share counted once).
+std::size_t keyframeBytes(const Keyframe& keyframe);
+
+}  // namespace slamd
