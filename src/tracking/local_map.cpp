@@ -9,7 +9,8 @@ LocalMap::LocalMap(double depth_sigma_coeff) : depth_sigma_coeff_(depth_sigma_co
 
 void LocalMap::observationOf(const Keyframe& keyframe, int feature_index, Eigen::Vector3d& p_world,
                              double& weight) const {
-  const Eigen::Vector3d& p_camera = keyframe.features.points[static_cast<std::size_t>(feature_index)];
+  const Eigen::Vector3d& p_camera =
+      keyframe.features.points[static_cast<std::size_t>(feature_index)];
   p_world = keyframe.T_world_camera * p_camera;
   const double z = p_camera.z();
   const double sigma_m = std::max(1e-4, depth_sigma_coeff_ * z * z);
@@ -31,8 +32,7 @@ void LocalMap::addKeyframe(const KeyframePtr& keyframe,
     std::int64_t id = i < feature_landmarks.size() ? feature_landmarks[i] : -1;
     auto found = id >= 0 ? landmarks_.find(id) : landmarks_.end();
     // Two features of one keyframe matched to one landmark: the second starts its own.
-    if (found != landmarks_.end() &&
-        found->second.representative().keyframe_id == keyframe->id) {
+    if (found != landmarks_.end() && found->second.representative().keyframe_id == keyframe->id) {
       found = landmarks_.end();
     }
     if (found == landmarks_.end()) {

@@ -69,8 +69,8 @@ TEST(LocalMap, ThePositionIsTheInverseVarianceMeanAndFollowsRemovals) {
   SE3 back = SE3::Identity();
   back.translation() = Eigen::Vector3d(0.0, 0.0, -1.0);
   map.addKeyframe(keyframeWith(1, back, {{0.01, 0, 2}}), {id});
-  const Eigen::Vector3d expected = (16.0 * Eigen::Vector3d(0, 0, 1) + Eigen::Vector3d(0.01, 0, 1)) /
-                                   17.0;
+  const Eigen::Vector3d expected =
+      (16.0 * Eigen::Vector3d(0, 0, 1) + Eigen::Vector3d(0.01, 0, 1)) / 17.0;
   EXPECT_NEAR((map.landmark(id)->p_world - expected).norm(), 0.0, 1e-9);
 
   // The near keyframe leaves the window: the far view alone places the landmark, and represents
@@ -95,8 +95,7 @@ TEST(LocalMap, CovisibleKeyframesShareLandmarksMostSharedFirst) {
   // Keyframe 1 shares 15 landmarks with 0, keyframe 2 shares 5 with 0 and 5 with 1, keyframe 3
   // none.
   std::vector<std::int64_t> share15(ids.begin(), ids.begin() + 15);
-  map.addKeyframe(keyframeWith(1, SE3::Identity(), {points.begin(), points.begin() + 15}),
-                  share15);
+  map.addKeyframe(keyframeWith(1, SE3::Identity(), {points.begin(), points.begin() + 15}), share15);
   std::vector<std::int64_t> share5(ids.begin(), ids.begin() + 5);
   map.addKeyframe(keyframeWith(2, SE3::Identity(), {points.begin(), points.begin() + 5}), share5);
   map.addKeyframe(keyframeWith(3, SE3::Identity(), {points.begin(), points.begin() + 5}), {});
