@@ -1019,20 +1019,21 @@ void VisualOdometry::trackLocalMap(const CurrentFrame& curr, const SE3& T_world_
   std::vector<std::int64_t> sources = local_map_.covisibleKeyframes(
       keyframe_->id, config_.local_map_min_shared, config_.local_map_keyframes);
   if (!keyframe_is_reference) sources.push_back(keyframe_->id);
-  std::unordered_set<std::int64_t> excluded;
+  // Landmarks seen once: searched, or excluded (the keyframe's own, already measured).
+  std::unordered_set<std::int64_t> seen;
   if (keyframe_is_reference) {
-    for (std::int64_t id : local_map_.landmarksOf(keyframe_->id)) excluded.insert(id);
+    for (std::int64_t id : local_map_.landmarksOf(keyframe_->id)) seen.insert(id);
   }
+  const std::size_t num_excluded = seen.size();
   struct Group {
     const Keyframe* kf = nullptr;
     std::vector<std::uint8_t> mask;
     std::vector<std::int64_t> landmark_of_feature;
   };
   std::unordered_map<std::int64_t, Group> groups;
-  std::unordered_set<std::int64_t> searched;
   for (std::int64_t source : sources) {
     for (std::int64_t id : local_map_.landmarksOf(source)) {
-      if (id < 0 || excluded.count(id) != 0 || !searched.insert(id).second) continue;
+      if (id < 0 || !seen.insert(id).second) continue;
       const MapLandmark* landmark = local_map_.landmark(id);
       if (landmark == nullptr) continue;
       const MapLandmark::Observation& view = landmark->representative();
@@ -1047,7 +1048,7 @@ void VisualOdometry::trackLocalMap(const CurrentFrame& curr, const SE3& T_world_
       group.landmark_of_feature[f] = id;
     }
   }
-  res.stats.local_map_landmarks = static_cast<int>(searched.size());
+  res.stats.local_map_landmarks = static_cast<int>(seen.size() - num_excluded);
   if (groups.empty()) return;
 
   // Search by projection around the current estimate: ratio test within the window and scale
@@ -1109,7 +1110,8 @@ void VisualOdometry::trackLocalMap(const CurrentFrame& curr, const SE3& T_world_
     candidates.swap(consistent);
   }
   // One landmark per current feature, none that the attempt already holds; then an even sample
-  // bounds the cost of patch alignment.
+  // bounds the cost of patch alignment. (The first candidate of a feature is kept: keeping the
+  // one with the closest descriptor instead was tried and was no better, see docs/tracking.md.)
   std::vector<Candidate> unique;
   for (const Candidate& cand : candidates) {
     std::uint8_t& taken = curr_taken[static_cast<std::size_t>(cand.match.curr_index)];
