@@ -8,6 +8,7 @@ PoseEstimator::PoseEstimator(const FilterConfig& config, VanishingPointSource va
 void PoseEstimator::reset() {
   filter_.reset();
   last_pose_ = PoseEstimate();
+  covariance_last_measured_.reset();
   last_utime_ = 0;
 }
 
@@ -28,6 +29,22 @@ EstimatedPacket PoseEstimator::process(TrackedPacket packet) {
   input.T_prev_curr = last_utime_ > 0 ? odometry.T_prev_curr : SE3::Identity();
   input.covariance = last_utime_ > 0 ? odometry.covariance : Matrix6d::Identity() * 1e-12;
   input.dt_s = last_utime_ > 0 ? utimeToSeconds(odometry.utime - last_utime_) : 0.0;
+  if (odometry.tracking_state == TrackingState::kRelocalized && last_utime_ > 0 &&
+      covariance_last_measured_) {
+    // The step from the pose held through the loss to the relocalised one is applied exactly,
+    // with the covariance of the last measured frame plus the measurement's (rotated into the
+    // filter's convention: translation in the world frame).
+    PoseEkf& ekf = filter_->ekf();
+    const SE3 T_world_curr = normalizedSE3(ekf.T_world_camera() * input.T_prev_curr);
+    Matrix6d J = Matrix6d::Identity();
+    J.topLeftCorner<3, 3>() = T_world_curr.linear();
+    const Matrix6d measurement = J * odometry.covariance_ref_curr * J.transpose();
+    Matrix6d covariance = *covariance_last_measured_;
+    if (measurement.allFinite()) covariance += measurement;
+    ekf.setPose(T_world_curr, covariance);
+    input.T_prev_curr = SE3::Identity();
+    input.covariance = Matrix6d::Identity() * 1e-12;
+  }
   input.depth_m = frame.depth_m;  // plane axes (filter.surface_axes) are detected here
   if (vanishing_point_source_ == VanishingPointSource::kDetectHere) {
     input.gray = frame.gray;
@@ -35,6 +52,10 @@ EstimatedPacket PoseEstimator::process(TrackedPacket packet) {
     input.detection = std::move(packet.vanishing_point);
   }
   const FilterOutput filtered = filter_->process(input);
+  if (odometry.tracking_state == TrackingState::kOk ||
+      odometry.tracking_state == TrackingState::kRelocalized) {
+    covariance_last_measured_ = filter_->ekf().poseCovariance();
+  }
   if (filtered.vanishing_point && filtered.update) {
     out.vanishing_point = VanishingPointReport{*filtered.vanishing_point, *filtered.update};
   }

@@ -131,6 +131,13 @@ const ConfigSchema<TrackingConfig>& TrackingConfig::schema() {
                   "recent one near the current pose if it tracks well (1 = never re-use)")
           .number("max_predicted_frames", &C::max_predicted_frames, 0, 1000, "frames",
                   "consecutive failed frames bridged by constant-velocity prediction before LOST")
+          .number("relocalization_keyframes", &C::relocalization_keyframes, 0, 1000, "keyframes",
+                  "after LOST, the first trackable frame is matched against this many of the "
+                  "most recent keyframes before it starts a new segment (0 = always a new "
+                  "segment)")
+          .number("relocalization_min_inliers", &C::relocalization_min_inliers, 3, 100000, "",
+                  "inliers a match against a keyframe needs to relocalise after LOST (the pose "
+                  "must also be within the motion limits since the last measured frame)")
           .number("failure_sigma_scale", &C::failure_sigma_scale, 1.0, 1e6, "",
                   "covariance inflation of a predicted (failed) frame relative to the last good "
                   "frame's")

@@ -1223,6 +1223,14 @@ OdometryResult VisualOdometry::process(const RgbdFrame& frame, const RgbdFramePt
   }
   if (!keyframe_) {
     prev_small_ = small;
+    SE3 T_world_curr;
+    if (state_ == TrackingState::kLost && relocalizeAfterLoss(curr, T_world_curr, res)) {
+      OdometryResult out =
+          acceptMeasurement(std::move(res), curr, frame, frame_ptr, T_world_curr, false, t_start);
+      // The step from the held pose is the loss's, not a velocity to extrapolate.
+      have_velocity_ = false;
+      return out;
+    }
     return startSegment(std::move(res), curr, frame, frame_ptr, t_start);
   }
 
@@ -1279,6 +1287,45 @@ OdometryResult VisualOdometry::process(const RgbdFrame& frame, const RgbdFramePt
   }
   return acceptMeasurement(std::move(res), curr, frame, frame_ptr, T_world_curr, new_keyframe,
                            t_start);
+}
+
+bool VisualOdometry::relocalizeAfterLoss(const CurrentFrame& curr, SE3& T_world_curr,
+                                         OdometryResult& res) {
+  const double dt_s = static_cast<double>(curr.utime - last_measured_utime_) * 1e-6;
+  int tried = 0;
+  for (auto it = recent_keyframes_.rbegin();
+       it != recent_keyframes_.rend() && tried < config_.relocalization_keyframes; ++it, ++tried) {
+    const KeyframePtr& kf = *it;
+    // Guided at the pose held through the loss first; the whole image when that finds too few.
+    const TrackAttempt attempt =
+        track(kf->features, kf->T_world_camera.inverse() * T_world_prev_, true, curr);
+    res.stats.time_matching_ms += attempt.time_matching_ms;
+    res.stats.time_motion_ms += attempt.time_motion_ms;
+    if (attempt.status != OdometryStatus::kOk ||
+        attempt.num_inliers < config_.relocalization_min_inliers) {
+      continue;
+    }
+    const SE3 T_world_candidate = normalizedSE3(kf->T_world_camera * attempt.T_ref_curr);
+    if (!implausibility(T_world_candidate, attempt.covariance, dt_s).empty()) {
+      ++res.stats.implausible_estimates;
+      continue;
+    }
+    keyframe_ = kf;
+    T_world_curr = T_world_candidate;
+    res.status = OdometryStatus::kOk;
+    res.tracking_state = TrackingState::kRelocalized;
+    res.T_ref_curr = attempt.T_ref_curr;
+    res.covariance_ref_curr = attempt.covariance;
+    res.covariance = attempt.covariance;
+    res.ref_utime = kf->utime;
+    res.reference_keyframe_id = kf->id;
+    res.stats.num_matches = attempt.num_matches;
+    res.stats.num_inliers = attempt.num_inliers;
+    res.stats.reprojection_error_px = attempt.rms_px;
+    res.stats.used_guided_matching = attempt.guided;
+    return true;
+  }
+  return false;
 }
 
 OdometryResult VisualOdometry::acceptMeasurement(OdometryResult res, const CurrentFrame& curr,

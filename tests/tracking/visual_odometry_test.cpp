@@ -153,7 +153,8 @@ TEST(VisualOdometry, FovisTracksSyntheticTexturedRoom) {
 TEST(VisualOdometry, PredictsThroughAShortGapThenDeclaresLostAndStartsANewSegment) {
   TrackingConfig config;
   config.max_predicted_frames = 2;
-  config.dense_fallback = false;  // a frame without depth would be aligned photometrically
+  config.dense_fallback = false;        // a frame without depth would be aligned photometrically
+  config.relocalization_keyframes = 0;  // the camera returns to the same view: no relocalising
   VisualOdometry vo(config);
   const test::TexturedBox box({-2, -1.5, -1}, {2, 1.5, 3}, 5);
   int i = 0;
@@ -189,6 +190,54 @@ TEST(VisualOdometry, PredictsThroughAShortGapThenDeclaresLostAndStartsANewSegmen
   EXPECT_EQ(r.segment, 1);
   ASSERT_TRUE(r.keyframe);
   EXPECT_EQ(r.keyframe->segment, 1);
+}
+
+TEST(VisualOdometry, AfterALossAFrameThatSeesARecentKeyframeAgainIsRelocalisedInTheSameSegment) {
+  TrackingConfig config;
+  config.max_predicted_frames = 2;
+  config.dense_fallback = false;  // a frame without depth would be aligned photometrically
+  VisualOdometry vo(config);
+  const test::TexturedBox box({-2, -1.5, -1}, {2, 1.5, 3}, 5);
+  const test::TexturedBox other_box({-2, -1.5, -1}, {2, 1.5, 3}, 77);
+  const SE3 T_world0_box = trajectoryPose(0).inverse();
+  const auto render = [&](const test::TexturedBox& scene, int i, bool with_depth) {
+    RgbdFrame f = scene.render(trajectoryPose(i), test::fr1Camera());
+    f.utime = 1'000'000 + i * 33'333;
+    if (!with_depth) f.depth_m.setTo(std::numeric_limits<float>::quiet_NaN());
+    return vo.processFrame(f);
+  };
+  const auto expectAt = [&](const OdometryResult& r, int i) {
+    const SE3 truth = T_world0_box * trajectoryPose(i);
+    EXPECT_LT((r.T_world_camera.translation() - truth.translation()).norm(), 0.005) << i;
+    EXPECT_LT(rotationErrorDeg(r.T_world_camera, truth), 0.2) << i;
+  };
+  int i = 0;
+  for (; i < 3; ++i) ASSERT_EQ(render(box, i, true).status, OdometryStatus::kOk);
+  OdometryResult r;
+  for (; i < 6; ++i) r = render(box, i, false);
+  ASSERT_EQ(r.tracking_state, TrackingState::kLost);
+  // The camera moved on during the loss (3 frames, about 3 cm): the pose held is that far off,
+  // and the first frame with depth again is measured against the keyframe instead.
+  r = render(box, i, true);
+  EXPECT_EQ(r.status, OdometryStatus::kOk);
+  EXPECT_EQ(r.tracking_state, TrackingState::kRelocalized);
+  EXPECT_EQ(r.segment, 0);
+  EXPECT_FALSE(r.is_keyframe);
+  EXPECT_GE(r.stats.num_inliers, config.relocalization_min_inliers);
+  expectAt(r, i);
+  r = render(box, ++i, true);
+  EXPECT_EQ(r.tracking_state, TrackingState::kOk);
+  EXPECT_EQ(r.segment, 0);
+  expectAt(r, i);
+
+  // Lost again, and what comes back is a room none of the keyframes saw: a new segment there.
+  for (int k = 0; k < 3; ++k) r = render(box, ++i, false);
+  ASSERT_EQ(r.tracking_state, TrackingState::kLost);
+  r = render(other_box, ++i, true);
+  EXPECT_EQ(r.status, OdometryStatus::kOk);
+  EXPECT_EQ(r.tracking_state, TrackingState::kOk);
+  EXPECT_TRUE(r.is_keyframe);
+  EXPECT_EQ(r.segment, 1);
 }
 
 TEST(VisualOdometry, DenseAlignmentMeasuresFramesFeaturesCannot) {

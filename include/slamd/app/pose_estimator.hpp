@@ -5,7 +5,10 @@
 // published pose needs besides: timestamps, sequence, tracking state and velocities.
 //
 // The world frame (the first camera frame) survives tracking loss: a new odometry segment
-// continues from the last pose, because the filter only ever sees increments.
+// continues from the last pose, because the filter only ever sees increments. A frame tracking
+// relocalised against a keyframe from before the loss is as certain as the filter was at the
+// last measured frame (plus the measurement): the covariance the loss accumulated is dropped, so
+// that no later correction (a vanishing point) can swing a pose that is known again.
 //
 // No threads inside; owned by the filter thread. process() never throws on bad data.
 
@@ -37,6 +40,8 @@ class PoseEstimator {
   VanishingPointSource vanishing_point_source_;
   std::optional<VanishingPointFilter> filter_;  ///< created at the first frame (intrinsics)
   PoseEstimate last_pose_;
+  /// The filter's pose covariance at the last frame tracking measured (kOk or kRelocalized).
+  std::optional<Matrix6d> covariance_last_measured_;
   Utime last_utime_ = 0;
   std::int64_t sequence_ = 0;
 };

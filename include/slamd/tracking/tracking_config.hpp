@@ -102,6 +102,11 @@ struct TrackingConfig {
   double keyframe_max_rotation_deg = 30.0;
   int keyframe_window = 30;
   int max_predicted_frames = 5;
+  // After LOST, the first trackable frame is matched against the most recent keyframes (guided at
+  // the last pose, then over the whole image) before a new segment starts at it: a camera that
+  // comes back to what it saw before the loss continues in the same world frame at once.
+  int relocalization_keyframes = 3;
+  int relocalization_min_inliers = 50;
   double failure_sigma_scale = 10.0;
 
   // --- Dense alignment where features fail (dense_alignment.hpp) ------------------------------

@@ -173,6 +173,10 @@ class VisualOdometry {
                            OdometryResult& res);
   void refineInLocalWindow(const CurrentFrame& curr, TrackAttempt& attempt, SE3& T_world_curr,
                            OdometryResult& res);
+  /// After LOST: measures the frame against the most recent keyframes (relocalization_*); true
+  /// (keyframe_, T_world_curr and res's reference fields set) when one matched well enough at a
+  /// pose the camera can have reached since the last measured frame.
+  bool relocalizeAfterLoss(const CurrentFrame& curr, SE3& T_world_curr, OdometryResult& res);
   /// The landmarks of the keyframes covisible with the keyframe, searched by projection at
   /// T_world_curr and refined jointly with the attempt (measured against T_world_ref; the
   /// keyframe's own landmarks are left out when it is the reference). Updates attempt.T_ref_curr,
