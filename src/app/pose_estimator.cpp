@@ -29,8 +29,8 @@ EstimatedPacket PoseEstimator::process(TrackedPacket packet) {
   input.T_prev_curr = last_utime_ > 0 ? odometry.T_prev_curr : SE3::Identity();
   input.covariance = last_utime_ > 0 ? odometry.covariance : Matrix6d::Identity() * 1e-12;
   input.dt_s = last_utime_ > 0 ? utimeToSeconds(odometry.utime - last_utime_) : 0.0;
-  if (odometry.tracking_state == TrackingState::kRelocalized && last_utime_ > 0 &&
-      covariance_last_measured_) {
+  // (A covariance of the last measured frame implies an earlier frame: last_utime_ > 0.)
+  if (odometry.tracking_state == TrackingState::kRelocalized && covariance_last_measured_) {
     // The step from the pose held through the loss to the relocalised one is applied exactly,
     // with the covariance of the last measured frame plus the measurement's (rotated into the
     // filter's convention: translation in the world frame).

@@ -60,6 +60,19 @@ int markInliers(const std::vector<Correspondence>& matches, const CameraIntrinsi
   return count;
 }
 
+/// Fills in a frame measured against a reference (a keyframe, the previous frame, or dense
+/// alignment's frame with ref_id -1): T_ref_curr and its covariance, which is the frame's too.
+void setMeasured(OdometryResult& res, TrackingState state, const SE3& T_ref_curr,
+                 const Matrix6d& covariance, Utime ref_utime, std::int64_t ref_id) {
+  res.status = OdometryStatus::kOk;
+  res.tracking_state = state;
+  res.T_ref_curr = T_ref_curr;
+  res.covariance_ref_curr = covariance;
+  res.covariance = covariance;
+  res.ref_utime = ref_utime;
+  res.reference_keyframe_id = ref_id;
+}
+
 /// Keeps at most cap elements, spread evenly over the vector (a bound on later per-item cost).
 template <typename T>
 void keepEvenSample(std::vector<T>& items, std::size_t cap) {
@@ -1257,13 +1270,8 @@ OdometryResult VisualOdometry::process(const RgbdFrame& frame, const RgbdFramePt
                              t_start);
   }
 
-  res.status = OdometryStatus::kOk;
-  res.tracking_state = TrackingState::kOk;
-  res.T_ref_curr = attempt.T_ref_curr;
-  res.covariance_ref_curr = attempt.covariance;
-  res.covariance = attempt.covariance;
-  res.ref_utime = measured.ref_utime;
-  res.reference_keyframe_id = measured.ref_id;
+  setMeasured(res, TrackingState::kOk, attempt.T_ref_curr, attempt.covariance, measured.ref_utime,
+              measured.ref_id);
 
   SE3 T_world_curr = normalizedSE3(measured.T_world_ref * attempt.T_ref_curr);
   bool new_keyframe = measured.from_previous ||
@@ -1312,13 +1320,8 @@ bool VisualOdometry::relocalizeAfterLoss(const CurrentFrame& curr, SE3& T_world_
     }
     keyframe_ = kf;
     T_world_curr = T_world_candidate;
-    res.status = OdometryStatus::kOk;
-    res.tracking_state = TrackingState::kRelocalized;
-    res.T_ref_curr = attempt.T_ref_curr;
-    res.covariance_ref_curr = attempt.covariance;
-    res.covariance = attempt.covariance;
-    res.ref_utime = kf->utime;
-    res.reference_keyframe_id = kf->id;
+    setMeasured(res, TrackingState::kRelocalized, attempt.T_ref_curr, attempt.covariance, kf->utime,
+                kf->id);
     res.stats.num_matches = attempt.num_matches;
     res.stats.num_inliers = attempt.num_inliers;
     res.stats.reprojection_error_px = attempt.rms_px;
@@ -1412,13 +1415,8 @@ bool VisualOdometry::measureDense(CurrentFrame& curr, const SE3& T_world_pred, O
     ++res.stats.implausible_estimates;
     return false;
   }
-  res.status = OdometryStatus::kOk;
-  res.tracking_state = TrackingState::kOk;
-  res.T_ref_curr = dense.T_ref_curr;
-  res.covariance_ref_curr = dense.covariance;
-  res.covariance = dense.covariance;
-  res.ref_utime = dense_reference_.utime;
-  res.reference_keyframe_id = -1;
+  setMeasured(res, TrackingState::kOk, dense.T_ref_curr, dense.covariance, dense_reference_.utime,
+              -1);
   res.stats.used_dense_alignment = true;
   res.stats.dense_degenerate_directions = dense.degenerate_directions;
   return true;
