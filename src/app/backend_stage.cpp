@@ -14,17 +14,48 @@ BackendStage::BackendStage(const BackendConfig& config,
                            std::shared_ptr<const Vocabulary> vocabulary)
     : config_(config),
       vocabulary_(std::move(vocabulary)),
-      backend_(std::make_unique<Backend>(config_, vocabulary_)) {}
+      backend_(std::make_unique<Backend>(config_, vocabulary_)) {
+  backend_->setFullOptimizationDeferred(config_.full_optimization_in_background);
+  if (config_.full_optimization_in_background) {
+    optimizer_ = std::make_unique<BackgroundOptimizer>();
+  }
+}
 
 void BackendStage::reset() {
+  // A job still running belongs to the graph being forgotten: its result is dropped.
+  if (optimizer_) optimizer_->wait();
   backend_ = std::make_unique<Backend>(config_, vocabulary_);
+  backend_->setFullOptimizationDeferred(config_.full_optimization_in_background);
   frames_ = KeyframeAnchoredTrajectory();
   keyframes_.clear();
   latest_keyframe_id_ = -1;
+  latest_keyframe_utime_ = 0;
   stats_ = BackendStageStats();
 }
 
 std::optional<BackendCorrection> BackendStage::process(const EstimatedPacket& packet) {
+  std::optional<BackendCorrection> correction;
+  if (optimizer_) {
+    // Heartbeats come here too, so a result is merged even while no frames arrive.
+    const Utime utime =
+        packet.frame ? packet.frame->utime : (packet.odometry ? packet.odometry->utime : Utime{0});
+    if (std::optional<FullOptimizationJob> done = optimizer_->poll()) {
+      correction = mergeFullOptimization(*done, utime);
+    }
+  }
+  // A keyframe's correction lists every pose too, so it supersedes a merge's.
+  if (std::optional<BackendCorrection> from_keyframe = processKeyframe(packet)) {
+    correction = std::move(from_keyframe);
+  }
+  if (optimizer_ && !optimizer_->busy()) {
+    if (std::optional<FullOptimizationJob> job = backend_->takeFullOptimizationJob()) {
+      optimizer_->submit(std::move(*job));
+    }
+  }
+  return correction;
+}
+
+std::optional<BackendCorrection> BackendStage::processKeyframe(const EstimatedPacket& packet) {
   if (!packet.odometry) return std::nullopt;  // heartbeat
   const TrackingState state = packet.pose.tracking_state;
   if (state == TrackingState::kLost || state == TrackingState::kNotInitialized) {
@@ -45,6 +76,7 @@ std::optional<BackendCorrection> BackendStage::process(const EstimatedPacket& pa
                                      ? backend_->addKeyframe(keyframe, odometry.covariance_ref_curr)
                                      : backend_->addKeyframe(keyframe);
     latest_keyframe_id_ = keyframe->id;
+    latest_keyframe_utime_ = keyframe->utime;
     frames_.addKeyframe(keyframe);
     if (update.culled) {
       ++stats_.culled_keyframes;
@@ -60,13 +92,44 @@ std::optional<BackendCorrection> BackendStage::process(const EstimatedPacket& pa
   return correction;
 }
 
+std::optional<BackendCorrection> BackendStage::mergeFullOptimization(const FullOptimizationJob& job,
+                                                                     Utime utime) {
+  const BackendUpdate update = backend_->finishFullOptimization(job);
+  if (!update.optimized) {
+    SLAMD_LOG_WARN(kLog) << "whole-graph optimisation failed ("
+                         << optimizationStatusName(job.result.status)
+                         << "): the graph keeps its local-window estimate";
+    return std::nullopt;
+  }
+  ++stats_.background_optimizations;
+  stats_.max_background_optimization_ms =
+      std::max(stats_.max_background_optimization_ms, job.result.time_ms);
+  SLAMD_LOG_DEBUG(kLog) << "whole graph of " << job.result.num_nodes << " keyframes optimised in "
+                        << job.result.time_ms << " ms in the background, merged";
+  return makeCorrection(update, utime);
+}
+
+void BackendStage::finish() {
+  if (!optimizer_) return;
+  const Utime utime = latest_keyframe_utime_;
+  if (std::optional<FullOptimizationJob> done = optimizer_->wait()) {
+    mergeFullOptimization(*done, utime);
+  }
+  if (std::optional<FullOptimizationJob> job = backend_->takeFullOptimizationJob()) {
+    job->run();
+    mergeFullOptimization(*job, utime);
+  }
+}
+
 BackendCorrection BackendStage::makeCorrection(const BackendUpdate& update, Utime utime) {
   ++stats_.optimizations;
   stats_.loops = backend_->numLoops();
   stats_.local_edges = backend_->numLocalEdges();
   stats_.relocalizations = backend_->numRelocalizations();
-  stats_.last_optimization_ms = update.optimization.time_ms;
-  stats_.max_optimization_ms = std::max(stats_.max_optimization_ms, update.optimization.time_ms);
+  // A whole-graph optimisation merged from the background took no time in this thread.
+  const bool in_background = optimizer_ != nullptr && update.full_optimization;
+  stats_.last_optimization_ms = in_background ? 0.0 : update.optimization.time_ms;
+  stats_.max_optimization_ms = std::max(stats_.max_optimization_ms, stats_.last_optimization_ms);
 
   BackendCorrection correction;
   correction.T_world_uncorrected = update.T_world_odometry;

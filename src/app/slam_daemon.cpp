@@ -813,6 +813,7 @@ bool SlamDaemon::Impl::writeMetrics(const std::vector<StageStats>& stats) {
 }
 
 void SlamDaemon::Impl::finishBackend() {
+  backend->finish();
   const BackendStageStats& stats = backend->stats();
   summary.keyframes = stats.keyframes;
   summary.loops = stats.loops;
@@ -825,8 +826,11 @@ void SlamDaemon::Impl::finishBackend() {
                        << stats.culled_keyframes << " redundant ones culled; "
                        << (stats.keyframes > 0 ? stats.keyframe_bytes / stats.keyframes / 1024 : 0)
                        << " KiB each), " << stats.loops << " loops, " << stats.relocalizations
-                       << " relocalisations, " << stats.optimizations << " optimisations (longest "
-                       << stats.max_optimization_ms << " ms)";
+                       << " relocalisations, " << stats.optimizations
+                       << " optimisations (longest in the back-end thread "
+                       << stats.max_optimization_ms << " ms; " << stats.background_optimizations
+                       << " of the whole graph in the background, longest "
+                       << stats.max_background_optimization_ms << " ms)";
   // The written trajectory and map take the final optimised poses, including corrections that
   // arrived after the publish and mapping threads had finished.
   trajectory = backend->optimizedTrajectory();

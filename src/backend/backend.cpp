@@ -286,6 +286,43 @@ void Backend::cull(const Keyframe& keyframe, const LoopDetection& match, Backend
   update.culled_into_id = match.match_id;
 }
 
+PoseGraphResult Backend::optimizeLocalWindow(std::int64_t keyframe_id) {
+  PoseGraphOptions options = options_;
+  options.max_iterations = std::min(options.max_iterations, config_.local_max_iterations);
+  return graph_.optimize(options, localWindow(keyframe_id));
+}
+
+std::optional<FullOptimizationJob> Backend::takeFullOptimizationJob() {
+  if (!full_optimization_wanted_ || full_optimization_out_ || graph_.numNodes() == 0) {
+    return std::nullopt;
+  }
+  full_optimization_wanted_ = false;
+  full_optimization_out_ = true;
+  FullOptimizationJob job;
+  job.graph = graph_;
+  job.options = options_;
+  job.newest_id = graph_.nodeIds().back();  // nodes are kept in the order they were added
+  return job;
+}
+
+BackendUpdate Backend::finishFullOptimization(const FullOptimizationJob& job) {
+  full_optimization_out_ = false;
+  BackendUpdate update;
+  update.optimization = job.result;
+  if (previous_ == nullptr || !mergeOptimizedCopy(job, graph_)) return update;
+  const std::int64_t newest_id = graph_.nodeIds().back();
+  if (newest_id != job.newest_id && config_.local_window_hops > 0) {
+    optimizeLocalWindow(newest_id);
+  }
+  update.keyframe_id = previous_->id;
+  update.optimized = true;
+  update.full_optimization = true;
+  update.corrected_poses.reserve(graph_.numNodes());
+  for (std::int64_t id : graph_.nodeIds()) update.corrected_poses.emplace_back(id, graph_.pose(id));
+  update.T_world_odometry = pose(previous_->id) * previous_->T_world_camera.inverse();
+  return update;
+}
+
 BackendUpdate Backend::add(const KeyframePtr& keyframe, const Matrix6d* covariance_prev_curr) {
   BackendUpdate update;
   if (keyframe == nullptr || hasKeyframe(keyframe->id)) return update;
@@ -345,13 +382,15 @@ BackendUpdate Backend::add(const KeyframePtr& keyframe, const Matrix6d* covarian
     }
   }
   if (changed) {
-    if (full || config_.local_window_hops == 0) {
+    const bool whole = full || config_.local_window_hops == 0;
+    if (whole && !defer_full_optimization_) {
       update.optimization = graph_.optimize(options_);
       update.full_optimization = true;
     } else {
-      PoseGraphOptions options = options_;
-      options.max_iterations = std::min(options.max_iterations, config_.local_max_iterations);
-      update.optimization = graph_.optimize(options, localWindow(keyframe->id));
+      // Deferred: the window now, the whole graph when the job comes back.
+      if (whole) full_optimization_wanted_ = true;
+      update.optimization = optimizeLocalWindow(keyframe->id);
+      update.full_optimization = false;
     }
     update.optimized = true;
   } else {

@@ -113,6 +113,10 @@ const ConfigSchema<BackendConfig>& BackendConfig::schema() {
           .number("full_optimization_chi2", &C::full_optimization_chi2, 0.0, 1e12, "",
                   "a loop edge, or a local edge beyond the window, whose whitened squared error "
                   "exceeds this re-optimises the whole graph")
+          .flag("full_optimization_in_background", &C::full_optimization_in_background,
+                "in the daemon, whole-graph optimisations run on a thread of their own and are "
+                "merged when done (the keyframe that asked gets its local window meanwhile); "
+                "false = in the back-end thread, before the next keyframe")
           .flag("cull_redundant_keyframes", &C::cull_redundant_keyframes,
                 "remove a new keyframe whose features other keyframes already see (ORB-SLAM's "
                 "rule, see cull_*); its odometry and loop edges are merged into the keyframe "

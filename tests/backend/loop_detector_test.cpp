@@ -241,6 +241,66 @@ TEST(Backend, ClosingTheRingLoopPullsTheDriftedKeyframesBackAndRelocalises) {
   expectRelocalisation(world, backend.loopDetector());
 }
 
+// The daemon's way: the whole-graph optimisation a far loop asks for is handed out as a job
+// and merged later (here three keyframes later, run on this thread). The ring ends as well
+// placed as when the whole graph is optimised in place.
+TEST(Backend, AWholeGraphOptimisationMergedLaterPlacesTheRingAsWellAsOneInPlace) {
+  const RenderedKeyframes& world = ringKeyframes();
+  Backend in_place(BackendConfig(), roomVocabulary());
+  Backend deferred(BackendConfig(), roomVocabulary());
+  deferred.setFullOptimizationDeferred(true);
+  std::optional<FullOptimizationJob> job;
+  int keyframes_since_job = 0;
+  int jobs = 0;
+  int whole_in_place = 0;
+  for (const KeyframePtr& kf : world.keyframes) {
+    if (in_place.addKeyframe(kf).full_optimization) ++whole_in_place;
+    const BackendUpdate u = deferred.addKeyframe(kf);
+    EXPECT_FALSE(u.full_optimization) << "keyframe " << kf->id;
+    if (job && ++keyframes_since_job == 3) {
+      job->run();
+      const BackendUpdate merged = deferred.finishFullOptimization(*job);
+      EXPECT_TRUE(merged.optimized);
+      EXPECT_TRUE(merged.full_optimization);
+      EXPECT_EQ(merged.corrected_poses.size(), deferred.graph().numNodes());
+      job.reset();
+    }
+    if (!job && (job = deferred.takeFullOptimizationJob())) {
+      ++jobs;
+      keyframes_since_job = 0;
+      EXPECT_FALSE(deferred.takeFullOptimizationJob().has_value()) << "one job at a time";
+    }
+  }
+  // At the end (BackendStage::finish): the job out, then one asked for while it was out.
+  if (job) {
+    job->run();
+    deferred.finishFullOptimization(*job);
+  }
+  if ((job = deferred.takeFullOptimizationJob())) {
+    ++jobs;
+    job->run();
+    deferred.finishFullOptimization(*job);
+  }
+  EXPECT_FALSE(deferred.fullOptimizationPending());
+  double rms_in_place = 0.0;
+  double rms_deferred = 0.0;
+  for (std::size_t k = 0; k < world.keyframes.size(); ++k) {
+    const Eigen::Vector3d p_true = world.truth[k].translation();
+    const std::int64_t id = world.keyframes[k]->id;
+    rms_in_place += (in_place.pose(id).translation() - p_true).squaredNorm();
+    rms_deferred += (deferred.pose(id).translation() - p_true).squaredNorm();
+  }
+  rms_in_place = std::sqrt(rms_in_place / static_cast<double>(world.keyframes.size()));
+  rms_deferred = std::sqrt(rms_deferred / static_cast<double>(world.keyframes.size()));
+  std::printf("ring: %d whole-graph optimisations in place, %d deferred; RMS %.4f m / %.4f m\n",
+              whole_in_place, jobs, rms_in_place, rms_deferred);
+  // Loops asked for while a job was out are served by the next one.
+  EXPECT_GE(whole_in_place, 1);
+  EXPECT_GE(jobs, 1);
+  EXPECT_LE(jobs, whole_in_place + 1);
+  EXPECT_LT(rms_deferred, rms_in_place + 0.01);
+}
+
 TEST(Backend, WithoutLocalEdgesOptimisesOnlyOnLoops) {
   const RenderedKeyframes& world = ringKeyframes();
   BackendConfig config;

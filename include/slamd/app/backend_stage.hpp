@@ -12,8 +12,14 @@
 // keeps keyframes without their images (compactKeyframe); culled keyframes leave the graph and
 // the published keyframe list, their frames stay anchored through the keyframe that covers them.
 //
-// No threads inside; owned by the back-end thread, then by the control thread after the pipeline
-// stopped. process() never throws on bad data.
+// Whole-graph optimisations (backend.full_optimization_in_background) run on a
+// BackgroundOptimizer's thread: process() hands out the Backend's job and, on a later call (every
+// frame and heartbeat calls it), merges the result and returns its correction. finish() waits
+// for the job in flight and runs any still wanted, so the final poses are the whole graph's.
+// Without it, the stage has no threads inside and is deterministic.
+//
+// Owned by the back-end thread, then by the control thread after the pipeline stopped.
+// process() never throws on bad data.
 
 #include <cstdint>
 #include <memory>
@@ -23,6 +29,7 @@
 
 #include "slamd/app/packets.hpp"
 #include "slamd/backend/backend.hpp"
+#include "slamd/backend/background_optimizer.hpp"
 #include "slamd/backend/keyframe_trajectory.hpp"
 #include "slamd/common/trajectory.hpp"
 #include "slamd/comms/pose_codec.hpp"
@@ -49,7 +56,11 @@ struct BackendStageStats {
   std::int64_t relocalizations = 0;
   std::int64_t optimizations = 0;
   double last_optimization_ms = 0.0;
+  /// Longest optimisation in the back-end thread (a local window, or a whole graph when not in
+  /// the background).
   double max_optimization_ms = 0.0;
+  std::int64_t background_optimizations = 0;    ///< whole-graph ones merged from the background
+  double max_background_optimization_ms = 0.0;  ///< their longest (on the worker thread)
 };
 
 class BackendStage {
@@ -59,6 +70,10 @@ class BackendStage {
   /// Takes the next filtered frame (heartbeats and lost frames are ignored). Returns a correction
   /// when this frame's keyframe made the back end re-optimise.
   std::optional<BackendCorrection> process(const EstimatedPacket& packet);
+
+  /// End of the run: waits for a whole-graph optimisation in flight and runs any still wanted,
+  /// so that optimizedTrajectory() and backend() hold the final poses.
+  void finish();
 
   /// Every tracked frame seen so far, at its keyframe's current (optimised) pose composed with
   /// the frame's pose relative to that keyframe; T_world_camera in the corrected world.
@@ -71,15 +86,23 @@ class BackendStage {
   const Backend& backend() const { return *backend_; }
 
  private:
+  /// The keyframe part of process(): a correction when this frame's keyframe re-optimised.
+  std::optional<BackendCorrection> processKeyframe(const EstimatedPacket& packet);
   BackendCorrection makeCorrection(const BackendUpdate& update, Utime utime);
+  /// Merges a finished whole-graph optimisation; its correction, if it moved anything.
+  std::optional<BackendCorrection> mergeFullOptimization(const FullOptimizationJob& job,
+                                                         Utime utime);
 
   BackendConfig config_;
   std::shared_ptr<const Vocabulary> vocabulary_;
   std::unique_ptr<Backend> backend_;
+  /// Whole-graph optimisations off the back-end thread (null when not in the background).
+  std::unique_ptr<BackgroundOptimizer> optimizer_;
   /// Every tracked frame with the filter's pose, anchored to its keyframe.
   KeyframeAnchoredTrajectory frames_;
   std::vector<KeyframePoseEntry> keyframes_;  ///< id order; poses filled in on demand
   std::int64_t latest_keyframe_id_ = -1;
+  Utime latest_keyframe_utime_ = 0;
   std::int64_t sequence_ = 0;
   BackendStageStats stats_;
 };

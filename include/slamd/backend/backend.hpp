@@ -43,6 +43,16 @@
 // the newest keyframe is ever culled, so M is never culled later. Not culled: the first keyframe
 // of a segment, one that relocalised, one of a segment not yet joined to the map.
 //
+// Whole-graph optimisations in the background (setFullOptimizationDeferred(true), as the daemon
+// runs it): a correction the local window cannot absorb is not run in addKeyframe. The keyframe
+// gets its local-window optimisation, and a copy of the whole graph is handed out
+// (takeFullOptimizationJob) to be optimised elsewhere (BackgroundOptimizer). Keyframes keep
+// coming meanwhile. finishFullOptimization() merges the optimised copy: its keyframes take
+// their optimised poses, keyframes added since are moved rigidly with the copy's newest
+// keyframe, and a local-window optimisation around the newest keyframe then brings in the
+// edges added since. Wanted again while one is out (another far loop), the next copy is taken
+// after the merge. Per keyframe the cost is then the local window's, whatever the graph's size.
+//
 // Relocalisation (backend.relocalization): a keyframe starting a new segment (after LOST) is tied
 // to the previous one by a very weak edge only, and matched against every keyframe of earlier
 // segments (LoopDetector::query, no recency exclusion or consistency). On a verified match a
@@ -53,11 +63,13 @@
 
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <unordered_map>
 #include <utility>
 #include <vector>
 
 #include "slamd/backend/backend_config.hpp"
+#include "slamd/backend/background_optimizer.hpp"
 #include "slamd/backend/loop_detector.hpp"
 #include "slamd/backend/pose_graph.hpp"
 #include "slamd/tracking/visual_odometry.hpp"
@@ -106,6 +118,20 @@ class Backend {
   /// keyframe and this one. Used for the odometry edge instead of the fixed ratio (floored at
   /// 1 mm / 0.05 degree). Ignored for the first keyframe of a segment.
   BackendUpdate addKeyframe(const KeyframePtr& keyframe, const Matrix6d& covariance_prev_curr);
+
+  /// Whole-graph optimisations become jobs (see the class comment) instead of running inside
+  /// addKeyframe. Off by default: the graph is then optimised in place, deterministically.
+  void setFullOptimizationDeferred(bool deferred) { defer_full_optimization_ = deferred; }
+  /// A copy of the graph to optimise whole, when one is wanted and none is out (the caller runs
+  /// it and hands it back to finishFullOptimization).
+  std::optional<FullOptimizationJob> takeFullOptimizationJob();
+  /// Merges an optimised copy (see the class comment). The update lists every keyframe's pose
+  /// and the correction for the newest one (optimized is false when the optimisation failed).
+  BackendUpdate finishFullOptimization(const FullOptimizationJob& job);
+  /// A whole-graph optimisation is wanted or out.
+  bool fullOptimizationPending() const {
+    return full_optimization_wanted_ || full_optimization_out_;
+  }
 
   /// Current (corrected) T_world_camera of a keyframe; the odometry pose before any loop. A
   /// culled keyframe's is the pose of the keyframe it was merged into, composed with the offset
@@ -157,6 +183,8 @@ class Backend {
   /// The verified local match that makes the keyframe redundant, if any (most inliers first).
   const LoopDetection* redundancyMatch(const Keyframe& keyframe,
                                        const std::vector<LoopDetection>& local) const;
+  /// Re-optimises the local window around `keyframe_id` (bounded iterations).
+  PoseGraphResult optimizeLocalWindow(std::int64_t keyframe_id);
   /// Removes the keyframe from the graph and the loop detector, merging its odometry edge into
   /// the keyframe of `match`.
   void cull(const Keyframe& keyframe, const LoopDetection& match, BackendUpdate& update);
@@ -175,6 +203,9 @@ class Backend {
   int num_loops_ = 0;
   int num_local_edges_ = 0;
   int num_relocalizations_ = 0;
+  bool defer_full_optimization_ = false;
+  bool full_optimization_wanted_ = false;  ///< deferred: a job should be handed out
+  bool full_optimization_out_ = false;     ///< deferred: a job is being optimised elsewhere
 };
 
 }  // namespace slamd

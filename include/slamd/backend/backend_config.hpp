@@ -79,6 +79,9 @@ struct BackendConfig {
   int local_window_hops = 2;
   int local_window_size = 40;
   double full_optimization_chi2 = 50.0;
+  /// The daemon runs whole-graph optimisations on a thread of their own (BackgroundOptimizer)
+  /// and merges them when done; per keyframe the back end then costs a local window only.
+  bool full_optimization_in_background = true;
   int local_max_iterations = 10;
 
   // --- Keyframe culling ------------------------------------------------------------------------
