@@ -26,6 +26,7 @@ void BackendStage::reset() {
   if (optimizer_) optimizer_->wait();
   backend_ = std::make_unique<Backend>(config_, vocabulary_);
   backend_->setFullOptimizationDeferred(config_.full_optimization_in_background);
+  backend_->setMemoryPressure(memory_pressure_);
   frames_ = KeyframeAnchoredTrajectory();
   keyframes_.clear();
   latest_keyframe_id_ = -1;
@@ -66,7 +67,8 @@ std::optional<BackendCorrection> BackendStage::processKeyframe(const EstimatedPa
   std::optional<BackendCorrection> correction;
   if (odometry.is_keyframe && odometry.keyframe) {
     // The graph takes the filter's pose: the published poses and the map are built from it.
-    auto keyframe = compactKeyframe(*odometry.keyframe, config_.align_patches);
+    auto keyframe = compactKeyframe(
+        *odometry.keyframe, config_.align_patches && memory_pressure_ == MemoryPressure::kNone);
     keyframe->T_world_camera = T_world_camera;
     // Measured straight against the previous keyframe: tracking's covariance of that step is the
     // odometry edge's uncertainty.
@@ -107,6 +109,11 @@ std::optional<BackendCorrection> BackendStage::mergeFullOptimization(const FullO
   SLAMD_LOG_DEBUG(kLog) << "whole graph of " << job.result.num_nodes << " keyframes optimised in "
                         << job.result.time_ms << " ms in the background, merged";
   return makeCorrection(update, utime);
+}
+
+void BackendStage::setMemoryPressure(MemoryPressure pressure) {
+  memory_pressure_ = pressure;
+  backend_->setMemoryPressure(pressure);
 }
 
 void BackendStage::finish() {

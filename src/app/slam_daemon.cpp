@@ -1,5 +1,7 @@
 #include "slamd/app/slam_daemon.hpp"
 
+#include <malloc.h>
+
 #include <algorithm>
 #include <atomic>
 #include <chrono>
@@ -17,6 +19,7 @@
 #include "slamd/command_t.hpp"
 #include "slamd/common/file_io.hpp"
 #include "slamd/common/log.hpp"
+#include "slamd/common/memory_pressure.hpp"
 #include "slamd/common/program_options.hpp"
 #include "slamd/common/trajectory.hpp"
 #include "slamd/comms/channels.hpp"
@@ -129,6 +132,12 @@ struct SlamDaemon::Impl {
   /// Owned by the publish thread while running, by the control thread after stop.
   Trajectory trajectory;
 
+  /// Resident memory against daemon.memory_limit_mb: the control loop updates it with every
+  /// status message; the mapping and back-end threads read the level and degrade by it.
+  MemoryGovernor memory_governor{0.0};
+  std::atomic<MemoryPressure> memory_pressure{MemoryPressure::kNone};
+  double resident_mb = 0.0;  ///< at the latest status message (control thread)
+
   DaemonSummary summary;
 
   Impl(Config& c, const DaemonOverrides& overrides) : config(c) {
@@ -140,6 +149,7 @@ struct SlamDaemon::Impl {
     if (!overrides.metrics_out.empty()) daemon.metrics_out = overrides.metrics_out;
     if (!overrides.lcm_url.empty()) config.set("lcm.url", overrides.lcm_url);
     checkOutputsAreDistinct();
+    memory_governor = MemoryGovernor(daemon.memory_limit_mb);
     channels = ChannelConfig::load(config);
     tracking_config = TrackingConfig::load(config);
     filter_config = FilterConfig::load(config);
@@ -186,6 +196,8 @@ struct SlamDaemon::Impl {
   void handleMapCommand(const slamd::command_t& command);
   void publishStatus(LcmBus& bus, StatusBuilder& builder, Pipeline& pipeline,
                      const std::string& note);
+  /// Reads the resident memory and hands the pressure level to the stages (logged on changes).
+  void updateMemoryPressure();
   /// Fills `summary` from the stopped pipeline's counters and the steps.
   void summarize(const std::vector<StageStats>& stats, const FrameSourceStats& source_stats,
                  const LcmBus& bus, std::int64_t start_ns);
@@ -325,7 +337,17 @@ void SlamDaemon::Impl::publishStatus(LcmBus& bus, StatusBuilder& builder, Pipeli
     extras.num_loops = back_end.loops;
     extras.num_relocalizations = back_end.relocalizations;
   }
+  updateMemoryPressure();
+  extras.memory_rss_mb = resident_mb;
+  extras.memory_limit_mb = daemon.memory_limit_mb;
+  extras.memory_pressure = memory_governor.level();
   extras.message = note;
+  if (memory_governor.level() != MemoryPressure::kNone) {
+    extras.message +=
+        (extras.message.empty() ? "" : "; ") + std::string("memory ") +
+        toString(memory_governor.level()) + " (" + std::to_string(static_cast<int>(resident_mb)) +
+        " of " + std::to_string(daemon.memory_limit_mb) + " MB): fewer keyframes and kept clouds";
+  }
   const std::string loss = steps->publish->stats().lossNote();
   if (!loss.empty()) extras.message += (extras.message.empty() ? "" : "; ") + loss;
   if (commands_refused.load(std::memory_order_relaxed) > 0) {
@@ -346,6 +368,32 @@ void SlamDaemon::Impl::publishStatus(LcmBus& bus, StatusBuilder& builder, Pipeli
   bus.publishMessage(channels.status,
                      builder.build(wallClockUtime(), steadyNowNs(), pipeline.stats(),
                                    steps->publish->endToEnd().snapshot(), extras));
+}
+
+void SlamDaemon::Impl::updateMemoryPressure() {
+  // Under pressure, memory the stages freed (released clouds, culled keyframes) goes back to
+  // the system: glibc keeps freed heap pages otherwise, and the resident size would not show
+  // what degrading saved.
+  if (memory_governor.level() != MemoryPressure::kNone) malloc_trim(0);
+  const std::optional<double> resident = residentMegabytes();
+  if (!resident) return;
+  resident_mb = *resident;
+  summary.peak_resident_mb = std::max(summary.peak_resident_mb, resident_mb);
+  const MemoryPressure before = memory_governor.level();
+  const MemoryPressure now = memory_governor.update(resident_mb);
+  memory_pressure.store(now, std::memory_order_relaxed);
+  if (now == before) return;
+  if (now > before) ++summary.memory_pressure_raised;
+  SLAMD_LOG_WARN(kLog) << "memory: " << static_cast<int>(resident_mb) << " MB resident, limit "
+                       << daemon.memory_limit_mb
+                       << " MB (daemon.memory_limit_mb): " << toString(before) << " -> "
+                       << toString(now)
+                       << (now == MemoryPressure::kNone
+                               ? ", no longer degrading"
+                               : (now == MemoryPressure::kNear
+                                      ? ", new keyframes culled harder and kept without images "
+                                        "or clouds"
+                                      : ", and the kept clouds of older keyframes released"));
 }
 
 bool SlamDaemon::Impl::openSource() {
@@ -420,10 +468,12 @@ void SlamDaemon::Impl::buildSteps(LcmBus& bus, DaemonPublisher& publisher) {
   if (mapper) {
     s.mapping.emplace(*mapper, mapping_config, publisher, backend ? &s.map_corrections : nullptr,
                       &map_requests);
+    s.mapping->watchMemoryPressure(&memory_pressure);
   }
   if (backend) {
     s.backend.emplace(*backend, daemon.world_frame, publisher, &s.pose_corrections,
                       mapper ? &s.map_corrections : nullptr);
+    s.backend->watchMemoryPressure(&memory_pressure);
   }
 }
 
@@ -512,6 +562,8 @@ int SlamDaemon::Impl::run(ShutdownSignals& signals) {
   buildSteps(*bus, publisher);
   Pipeline pipeline(PipelineMode::kThreaded);
   wire(pipeline);
+  // A daemon that starts near its memory limit degrades from the first keyframe on.
+  updateMemoryPressure();
 
   StatusBuilder status_builder;
   pipeline.start();
@@ -750,6 +802,12 @@ bool SlamDaemon::Impl::writeMetrics(const std::vector<StageStats>& stats) {
   json.key("end_to_end_p50_ms").value(summary.end_to_end_p50_ms);
   json.key("end_to_end_p95_ms").value(summary.end_to_end_p95_ms);
   json.key("end_to_end_p99_ms").value(summary.end_to_end_p99_ms);
+  // Resident memory at the status messages, and how often the memory limit made slamd degrade.
+  json.key("memory").beginObject();
+  json.key("limit_mb").value(daemon.memory_limit_mb);
+  json.key("peak_resident_mb").value(summary.peak_resident_mb);
+  json.key("pressure_raised").value(static_cast<std::int64_t>(summary.memory_pressure_raised));
+  json.endObject();
   if (backend) {
     json.key("backend").beginObject();
     json.key("keyframes").value(summary.keyframes);
@@ -770,6 +828,8 @@ bool SlamDaemon::Impl::writeMetrics(const std::vector<StageStats>& stats) {
     json.key("relocalizations").value(summary.relocalizations);
     json.key("optimizations").value(summary.optimizations);
     json.key("max_optimization_ms").value(summary.max_optimization_ms);
+    json.key("background_optimizations").value(summary.background_optimizations);
+    json.key("max_background_optimization_ms").value(summary.max_background_optimization_ms);
     json.endObject();
   }
   if (mapper) {
@@ -779,6 +839,9 @@ bool SlamDaemon::Impl::writeMetrics(const std::vector<StageStats>& stats) {
     json.key("frames_integrated").value(map_stats.frames_integrated);
     json.key("keyframe_clouds").value(map_stats.keyframe_clouds);
     json.key("keyframe_cloud_bytes").value(map_stats.keyframe_cloud_bytes);
+    json.key("keyframe_clouds_refused").value(map_stats.keyframe_clouds_refused);
+    json.key("keyframe_clouds_released").value(map_stats.keyframe_clouds_released);
+    json.key("octree_bytes").value(static_cast<std::int64_t>(mapper->memoryBytes()));
     json.key("keyframes_moved").value(map_stats.keyframes_moved);
     json.key("keyframes_taken_out").value(map_stats.keyframes_taken_out);
     json.key("corrections_caught_up").value(map_stats.corrections_caught_up);
@@ -822,6 +885,8 @@ void SlamDaemon::Impl::finishBackend() {
   summary.max_optimization_ms = stats.max_optimization_ms;
   summary.culled_keyframes = stats.culled_keyframes;
   summary.keyframe_bytes = stats.keyframe_bytes;
+  summary.background_optimizations = stats.background_optimizations;
+  summary.max_background_optimization_ms = stats.max_background_optimization_ms;
   SLAMD_LOG_INFO(kLog) << "back end: " << stats.keyframes << " keyframes ("
                        << stats.culled_keyframes << " redundant ones culled; "
                        << (stats.keyframes > 0 ? stats.keyframe_bytes / stats.keyframes / 1024 : 0)

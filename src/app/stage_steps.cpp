@@ -349,6 +349,11 @@ void MappingStep::publishOutputs(const MapperOutputs& outputs) {
 void MappingStep::process(const EstimatedPacket& packet) {
   if (!enter(packet.reset_epoch, packet.frame)) return;
   const std::int64_t cycle_start_ns = steadyNowNs();
+  if (memory_pressure_ != nullptr) {
+    const MemoryPressure pressure = memory_pressure_->load(std::memory_order_relaxed);
+    mapper_.setMemoryPressure(pressure);
+    if (pressure == MemoryPressure::kOver) mapper_.releaseKeyframeClouds(kKeptCloudsOverTheLimit);
+  }
   applyCorrections();
   serveRequests();
   if (packet.frame && packet.odometry && packet.pose.tracking_state != TrackingState::kLost &&
@@ -407,6 +412,9 @@ void BackendStep::process(const EstimatedPacket& packet) {
   const Utime utime =
       packet.frame ? packet.frame->utime : (packet.odometry ? packet.odometry->utime : Utime{-1});
   if (!enter(packet.reset_epoch, utime)) return;
+  if (memory_pressure_ != nullptr) {
+    backend_.setMemoryPressure(memory_pressure_->load(std::memory_order_relaxed));
+  }
   std::optional<BackendCorrection> correction = backend_.process(packet);
   const BackendStageStats& stats = backend_.stats();
   keyframes_.store(static_cast<std::int32_t>(stats.keyframes), std::memory_order_relaxed);

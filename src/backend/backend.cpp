@@ -221,7 +221,17 @@ const LoopDetection* Backend::redundancyMatch(const Keyframe& keyframe,
       covering.push_back(&match);
     }
   }
-  if (static_cast<int>(covering.size()) < config_.cull_min_covering_keyframes) return nullptr;
+  // Under memory pressure fewer keyframes are kept: the rule is relaxed.
+  int min_covering = config_.cull_min_covering_keyframes;
+  double min_covered_ratio = config_.cull_min_covered_ratio;
+  if (memory_pressure_ == MemoryPressure::kNear) {
+    min_covering = std::max(1, min_covering - 1);
+    min_covered_ratio = std::min(min_covered_ratio, 0.8);
+  } else if (memory_pressure_ == MemoryPressure::kOver) {
+    min_covering = 1;
+    min_covered_ratio = std::min(min_covered_ratio, 0.7);
+  }
+  if (static_cast<int>(covering.size()) < min_covering) return nullptr;
   // ORB-SLAM's rule with views for landmarks: a feature with depth is covered by a keyframe
   // whose view it lies in (in front, inside the image) at the same or a finer scale (at most one
   // ORB pyramid level, 1.2x, farther away).
@@ -245,10 +255,9 @@ const LoopDetection* Backend::redundancyMatch(const Keyframe& keyframe,
         ++views;
       }
     }
-    if (views >= config_.cull_min_covering_keyframes) ++covered;
+    if (views >= min_covering) ++covered;
   }
-  if (with_depth == 0 ||
-      static_cast<double>(covered) < config_.cull_min_covered_ratio * with_depth) {
+  if (with_depth == 0 || static_cast<double>(covered) < min_covered_ratio * with_depth) {
     return nullptr;
   }
   // Merged into the one that sees it best.

@@ -68,6 +68,9 @@ slamd::status_t StatusBuilder::build(Utime now_utime, std::int64_t now_steady_ns
   status.num_keyframes = extras.num_keyframes;
   status.num_loops = extras.num_loops;
   status.num_relocalizations = extras.num_relocalizations;
+  status.memory_rss_mb = extras.memory_rss_mb;
+  status.memory_limit_mb = extras.memory_limit_mb;
+  status.memory_pressure = static_cast<std::int8_t>(extras.memory_pressure);
   status.message = extras.message;
   previous_steady_ns_ = now_steady_ns;
   return status;
@@ -96,6 +99,15 @@ std::string renderStatusTable(const status_t& status, std::uint64_t malformed) {
       << "   map: " << status.map_occupied_voxels << " occupied / " << status.map_total_voxels
       << " voxels   back end: " << status.num_keyframes << " keyframes, " << status.num_loops
       << " loops, " << status.num_relocalizations << " relocalisations\n";
+  std::snprintf(line, sizeof(line), "memory: %.0f MB resident", status.memory_rss_mb);
+  out << line;
+  if (status.memory_limit_mb > 0) {
+    const int pressure = status.memory_pressure;
+    out << ", limit " << status.memory_limit_mb << " MB, "
+        << (pressure >= 0 && pressure <= 2 ? toString(static_cast<MemoryPressure>(pressure))
+                                           : "unknown pressure");
+  }
+  out << "\n";
   if (!status.message.empty()) out << "note: " << status.message << "\n";
   if (malformed) out << "(" << malformed << " malformed status messages ignored)\n";
   return out.str();

@@ -575,6 +575,10 @@ void Mapper::insertIntoTree(Tree& tree, const octomap::point3d& origin,
 bool Mapper::keepKeyframe(std::int64_t id, const PointCloud& cloud, const SE3& T_world_camera,
                           Utime utime) {
   if (!config_.keep_keyframe_clouds) return false;
+  if (memory_pressure_ != MemoryPressure::kNone) {
+    ++stats_.keyframe_clouds_refused;
+    return false;
+  }
   const auto bytesOf = [](const PointCloud& c) {
     return static_cast<std::int64_t>(c.points.size() * sizeof(Eigen::Vector3f) +
                                      c.colors_bgr.size() * sizeof(ColorBgr));
@@ -1141,6 +1145,24 @@ void Mapper::eraseKeyframe(std::map<std::int64_t, KeyframeCloud>::iterator it) {
                                 it->second.cloud_camera.colors_bgr.size() * sizeof(ColorBgr));
   keyframes_.erase(it);
   stats_.keyframe_clouds = static_cast<std::int64_t>(keyframes_.size());
+}
+
+std::size_t Mapper::releaseKeyframeClouds(std::size_t keep_newest) {
+  std::size_t oldest = keyframes_.size() > keep_newest ? keyframes_.size() - keep_newest : 0;
+  std::size_t released = 0;
+  for (auto it = keyframes_.begin(); oldest > 0 && it != keyframes_.end(); --oldest) {
+    const KeyframeCloud& keyframe = it->second;
+    const bool settled = keyframe.parts_in_map == keyframe.parts && !keyframe.to_move &&
+                         !keyframe.moving && !keyframe.to_forget;
+    if (!settled) {
+      ++it;
+      continue;
+    }
+    eraseKeyframe(it++);
+    ++released;
+    ++stats_.keyframe_clouds_released;
+  }
+  return released;
 }
 
 std::vector<std::int64_t> Mapper::keptKeyframeIds() const {

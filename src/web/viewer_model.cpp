@@ -393,6 +393,12 @@ std::string ViewerModel::statusMessage() const {
       .value(status.num_loops)
       .key("num_relocalizations")
       .value(status.num_relocalizations)
+      .key("memory_rss_mb")
+      .value(status.memory_rss_mb)
+      .key("memory_limit_mb")
+      .value(status.memory_limit_mb)
+      .key("memory_pressure")
+      .value(static_cast<int>(status.memory_pressure))
       .key("message")
       .value(status.message)
       // slamd has no corridor mode yet (issue 23); the page shows that plainly.

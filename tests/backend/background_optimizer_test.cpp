@@ -45,8 +45,8 @@ PoseGraph driftedRing(int n, std::mt19937& rng) {
     graph.addNode(k, T_world_est);
     graph.addEdge({k - 1, k, Z, informationOf(0.01, 0.005), EdgeKind::kOdometry});
   }
-  graph.addEdge({0, n - 1, truth[0].inverse() * truth[n - 1], informationOf(0.01, 0.005),
-                 EdgeKind::kLoop});
+  graph.addEdge(
+      {0, n - 1, truth[0].inverse() * truth[n - 1], informationOf(0.01, 0.005), EdgeKind::kLoop});
   return graph;
 }
 

@@ -474,10 +474,12 @@ struct CullingRun {
   double rms_error_m = 0.0;  ///< every keyframe (culled ones through backend.pose)
 };
 
-CullingRun runPingPong(const PingPong& run, bool cull) {
+CullingRun runPingPong(const PingPong& run, bool cull,
+                       MemoryPressure pressure = MemoryPressure::kNone) {
   BackendConfig config;
   config.cull_redundant_keyframes = cull;
   Backend backend(config, roomVocabulary());
+  backend.setMemoryPressure(pressure);
   CullingRun out;
   for (std::size_t k = 0; k < run.keyframes.size(); ++k) {
     const BackendUpdate update = backend.addKeyframe(run.keyframes[k]);
@@ -531,6 +533,24 @@ TEST(Backend, RevisitingTheSamePlaceAddsNoKeyframesWhenRedundantOnesAreCulled) {
   // What a culled keyframe held is still in the map: every keyframe's pose, culled or not, is
   // as good as without culling (within a centimetre).
   EXPECT_LT(culled.rms_error_m, kept.rms_error_m + 0.01);
+}
+
+// daemon.memory_limit_mb: near and over the limit the culling rule is relaxed, so fewer
+// keyframes are kept, and what the culled ones held stays in the map.
+TEST(Backend, UnderMemoryPressureFewerKeyframesAreKept) {
+  const RenderedKeyframes lap = renderKeyframes("room", 5, 40);
+  const PingPong run = pingPong(lap, 2);
+  const CullingRun normal = runPingPong(run, true);
+  const CullingRun near = runPingPong(run, true, MemoryPressure::kNear);
+  const CullingRun over = runPingPong(run, true, MemoryPressure::kOver);
+  std::printf(
+      "room ping-pong, %zu keyframes over 2 laps: kept %zu / %zu / %zu (no pressure / near / "
+      "over the limit); RMS keyframe error %.4f / %.4f / %.4f m\n",
+      run.keyframes.size(), normal.keyframes_after_lap.back(), near.keyframes_after_lap.back(),
+      over.keyframes_after_lap.back(), normal.rms_error_m, near.rms_error_m, over.rms_error_m);
+  EXPECT_LT(near.keyframes_after_lap.back(), normal.keyframes_after_lap.back());
+  EXPECT_LT(over.keyframes_after_lap.back(), near.keyframes_after_lap.back());
+  EXPECT_LT(over.rms_error_m, normal.rms_error_m + 0.02);
 }
 
 TEST(LoopDetector, ARemovedKeyframeIsNeverReturnedAgain) {

@@ -162,6 +162,9 @@ slamd::status_t example() {
   m.num_keyframes = 40;
   m.num_loops = 3;
   m.num_relocalizations = 1;
+  m.memory_rss_mb = 251.5;
+  m.memory_limit_mb = 300;
+  m.memory_pressure = 1;
   m.message = "ok";
   return m;
 }

@@ -53,5 +53,29 @@ TEST(StatusBuilder, RatesAndPercentilesCoverTheIntervalSinceTheLastMessage) {
   EXPECT_NEAR(status.end_to_end_p50_ms, 20.0, 2.0);
 }
 
+TEST(StatusBuilder, CarriesAndShowsResidentMemoryAndTheMemoryLimit) {
+  StatusBuilder builder;
+  LatencyHistogram end_to_end;
+  StatusExtras extras;
+  extras.memory_rss_mb = 312.4;
+  extras.memory_limit_mb = 300;
+  extras.memory_pressure = MemoryPressure::kOver;
+  const slamd::status_t status = builder.build(
+      1, 1'000'000'000, {stage("tracking", 30, 5.0, 30, 0)}, end_to_end.snapshot(), extras);
+  EXPECT_DOUBLE_EQ(status.memory_rss_mb, 312.4);
+  EXPECT_EQ(status.memory_limit_mb, 300);
+  EXPECT_EQ(status.memory_pressure, 2);
+  const std::string table = renderStatusTable(status, 0);
+  EXPECT_NE(table.find("memory: 312 MB resident, limit 300 MB, over the limit"), std::string::npos)
+      << table;
+  // Without a limit only the resident size is shown; a received level out of range is named so.
+  slamd::status_t unlimited = status;
+  unlimited.memory_limit_mb = 0;
+  EXPECT_NE(renderStatusTable(unlimited, 0).find("memory: 312 MB resident\n"), std::string::npos);
+  slamd::status_t odd = status;
+  odd.memory_pressure = 9;
+  EXPECT_NE(renderStatusTable(odd, 0).find("unknown pressure"), std::string::npos);
+}
+
 }  // namespace
 }  // namespace slamd

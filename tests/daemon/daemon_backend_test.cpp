@@ -99,5 +99,36 @@ TEST_F(DaemonWithBackEnd, AfterTheLensIsCoveredTrackingResumesInTheSameMap) {
               static_cast<long long>(slam.summary.relocalizations), slam.ate_rmse_m);
 }
 
+// daemon.memory_limit_mb far below what the run needs: the daemon degrades instead of failing.
+// It keeps fewer keyframes, keeps new ones without their alignment images, says so, and still
+// tracks every frame.
+TEST_F(DaemonWithBackEnd, AMemoryLimitBelowWhatTheRunNeedsMakesItKeepFewerKeyframes) {
+  const RunResult normal = runRoomLap(true, "no_limit");
+  const RunResult limited = runRoomLap(true, "limited", {"daemon.memory_limit_mb=1"});
+  std::printf(
+      "room lap: %lld keyframes of %lld bytes each without a limit, %lld of %lld bytes under a "
+      "1 MB limit; ATE %.4f m / %.4f m\n",
+      static_cast<long long>(normal.summary.keyframes),
+      static_cast<long long>(normal.summary.keyframes > 0
+                                 ? normal.summary.keyframe_bytes / normal.summary.keyframes
+                                 : 0),
+      static_cast<long long>(limited.summary.keyframes),
+      static_cast<long long>(limited.summary.keyframes > 0
+                                 ? limited.summary.keyframe_bytes / limited.summary.keyframes
+                                 : 0),
+      normal.ate_rmse_m, limited.ate_rmse_m);
+  EXPECT_EQ(normal.summary.memory_pressure_raised, 0u);
+  EXPECT_GE(limited.summary.memory_pressure_raised, 1u);
+  EXPECT_GT(limited.summary.peak_resident_mb, 1.0);
+  EXPECT_EQ(limited.summary.poses_published, normal.summary.poses_published);
+  EXPECT_EQ(limited.summary.errors, 0u);
+  EXPECT_LT(limited.summary.keyframes, normal.summary.keyframes);
+  // New keyframes are kept without the image patch alignment uses (most of a keyframe's bytes).
+  ASSERT_GT(limited.summary.keyframes, 0);
+  EXPECT_LT(limited.summary.keyframe_bytes / limited.summary.keyframes,
+            normal.summary.keyframe_bytes / normal.summary.keyframes / 2);
+  EXPECT_LT(limited.ate_rmse_m, 0.05);
+}
+
 }  // namespace
 }  // namespace slamd

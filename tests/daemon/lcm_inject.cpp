@@ -48,7 +48,7 @@ int main(int argc, char** argv) {
       default: {  // a valid fingerprint, then a string whose length field is INT32_MIN
         // The fields before the first string: command_t utime, command; pose_t utime, sequence;
         // status_t utime, num_stages 0, three latencies, tracking state, two voxel counts, three
-        // counters.
+        // counters, resident memory, memory limit, memory pressure.
         std::int64_t hash = slamd::command_t::getHash();
         std::size_t before_string = 8 + 1;
         if (channel == "SLAMD_POSE") {
@@ -56,7 +56,7 @@ int main(int argc, char** argv) {
           before_string = 8 + 8;
         } else if (channel == "SLAMD_STATUS") {
           hash = slamd::status_t::getHash();
-          before_string = 8 + 4 + 3 * 8 + 1 + 2 * 8 + 3 * 4;
+          before_string = 8 + 4 + 3 * 8 + 1 + 2 * 8 + 3 * 4 + 8 + 4 + 1;
         }
         for (int k = 0; k < 8; ++k)
           bytes.push_back(static_cast<std::uint8_t>(hash >> (56 - 8 * k)));

@@ -478,6 +478,51 @@ TEST(Mapper, AForgottenKeyframeLeavesTheMapAsIfItHadNeverBeenThere) {
   expectSameVoxels(*queued_twice.ocTree(), *once.ocTree());
 }
 
+// daemon.memory_limit_mb: under pressure no new keyframe cloud is kept (it goes in at once), and
+// releasing clouds keeps the newest ones; neither changes the map.
+TEST(Mapper, UnderMemoryPressureCloudsAreNotKeptOrAreReleasedAndTheMapStaysTheSame) {
+  const BoxRoom room;
+  const MappingConfig config = testConfig();
+  const std::vector<SE3> views = test::lookAroundPoses(4);
+  ASSERT_GE(views.size(), 6u);
+  Mapper pressed(config);
+  Mapper normal(config);
+  for (std::size_t i = 0; i < views.size(); ++i) {
+    const RgbdFrame frame = room.render(views[i]);
+    // The first two keyframes come before the pressure, the others under it.
+    if (i == 2) pressed.setMemoryPressure(MemoryPressure::kNear);
+    pressed.addKeyframe(frame, views[i], static_cast<std::int64_t>(i));
+    normal.addKeyframe(frame, views[i], static_cast<std::int64_t>(i));
+  }
+  pressed.catchUp(std::numeric_limits<double>::infinity());
+  normal.catchUp(std::numeric_limits<double>::infinity());
+  EXPECT_EQ(pressed.keptKeyframeIds(), (std::vector<std::int64_t>{0, 1}));
+  EXPECT_EQ(pressed.stats().keyframe_clouds_refused, static_cast<std::int64_t>(views.size()) - 2);
+  expectSameVoxels(*pressed.ocTree(), *normal.ocTree());
+
+  // Releasing keeps the newest clouds; a cloud with a move still queued is not released.
+  const std::int64_t bytes_before = normal.stats().keyframe_cloud_bytes;
+  SE3 moved = views[0];
+  moved.translation().x() += 0.2;
+  normal.correctKeyframePoses({{0, moved}});
+  ASSERT_EQ(normal.keyframesQueued(), 1u);
+  EXPECT_EQ(normal.releaseKeyframeClouds(2), views.size() - 3);
+  std::vector<std::int64_t> expected_kept{0};
+  for (std::size_t i = views.size() - 2; i < views.size(); ++i) {
+    expected_kept.push_back(static_cast<std::int64_t>(i));
+  }
+  EXPECT_EQ(normal.keptKeyframeIds(), expected_kept);
+  EXPECT_EQ(normal.stats().keyframe_clouds_released, static_cast<std::int64_t>(views.size()) - 3);
+  EXPECT_LT(normal.stats().keyframe_cloud_bytes, bytes_before);
+  Mapper reference(config);
+  for (std::size_t i = 0; i < views.size(); ++i) {
+    reference.integrate(room.render(views[i]), views[i], static_cast<std::int64_t>(i));
+  }
+  expectSameVoxels(*normal.ocTree(), *reference.ocTree());
+  // A released keyframe can no longer be moved: its correction names an unknown id.
+  EXPECT_EQ(normal.correctKeyframePoses({{1, moved}}).unknown_ids, 1u);
+}
+
 TEST(Mapper, KeyframesForgottenInStepsGoFirstAndLeaveNothingBehind) {
   const BoxRoom room;
   const MappingConfig config = testConfig();

@@ -43,18 +43,20 @@ constexpr const char* kProgram = "slamd-export";
 const char* const kStatusCsvHeader =
     "utime,stage,rate_hz,latency_p50_ms,latency_p95_ms,latency_p99_ms,queue_depth,queue_capacity,"
     "drops,errors,processed,end_to_end_p50_ms,end_to_end_p95_ms,end_to_end_p99_ms,tracking_state,"
-    "map_occupied_voxels,map_total_voxels,num_keyframes,num_loops,num_relocalizations";
+    "map_occupied_voxels,map_total_voxels,num_keyframes,num_loops,num_relocalizations,"
+    "memory_rss_mb,memory_limit_mb,memory_pressure";
 
 /// One CSV row per stage of a status message; the message's own fields repeat on every row, so
 /// each row stands alone for plotting (one stage's latency over time, say).
 void appendStatusRows(const slamd::status_t& status, std::string& csv) {
   char tail[512];
-  std::snprintf(tail, sizeof(tail), "%.3f,%.3f,%.3f,%s,%lld,%lld,%d,%d,%d",
+  std::snprintf(tail, sizeof(tail), "%.3f,%.3f,%.3f,%s,%lld,%lld,%d,%d,%d,%.1f,%d,%d",
                 status.end_to_end_p50_ms, status.end_to_end_p95_ms, status.end_to_end_p99_ms,
                 trackingStateName(static_cast<TrackingState>(status.tracking_state)),
                 static_cast<long long>(status.map_occupied_voxels),
                 static_cast<long long>(status.map_total_voxels), status.num_keyframes,
-                status.num_loops, status.num_relocalizations);
+                status.num_loops, status.num_relocalizations, status.memory_rss_mb,
+                status.memory_limit_mb, static_cast<int>(status.memory_pressure));
   for (const slamd::stage_status_t& stage : status.stages) {
     char head[512];
     std::snprintf(head, sizeof(head), "%lld,%s,%.3f,%.3f,%.3f,%.3f,%d,%d,%lld,%lld,%lld,",

@@ -62,6 +62,14 @@
     (c) => ({ '&': '&amp;', '<': '&lt;', '>': '&gt;', '"': '&quot;', "'": '&#39;' }[c]));
   const formatNumber = (value, digits) =>
     (typeof value === 'number' && Number.isFinite(value) ? value.toFixed(digits) : '-');
+  // Resident memory, and the limit with the level slamd degrades by (status_t.memory_pressure).
+  const memoryText = (s) => {
+    const resident = `${formatNumber(s.memory_rss_mb, 0)} MB`;
+    if (!(s.memory_limit_mb > 0)) return `${resident} (no limit)`;
+    const levels = ['under the limit', 'near the limit: degrading', 'over the limit: degrading'];
+    const level = levels[s.memory_pressure] || `pressure ${s.memory_pressure}`;
+    return `${resident} of ${s.memory_limit_mb} MB, ${level}`;
+  };
 
   // ---------------------------------------------------------------------------------------------
   // Growable position + colour vertex storage for one BufferGeometry. Capacity grows by doubling;
@@ -629,6 +637,7 @@
       ['corridor mode', s.corridor_mode],
       ['map voxels occupied/total', `${s.map_occupied_voxels} / ${s.map_total_voxels}`],
       ['keyframes / loops / relocalisations', `${s.num_keyframes} / ${s.num_loops} / ${s.num_relocalizations}`],
+      ['memory', memoryText(s)],
       ['message', s.message || ''],
     ].map(([name, value]) => `<tr><td>${escapeHtml(name)}</td><td>${escapeHtml(value)}</td></tr>`).join('');
     container.innerHTML = `<table class="stages"><thead><tr><th>stage</th><th>Hz</th><th>p50</th><th>p95</th>

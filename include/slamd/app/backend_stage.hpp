@@ -71,6 +71,11 @@ class BackendStage {
   /// when this frame's keyframe made the back end re-optimise.
   std::optional<BackendCorrection> process(const EstimatedPacket& packet);
 
+  /// Memory pressure (common/memory_pressure.hpp): the Backend culls harder, and from kNear on
+  /// new keyframes are kept without the image patch alignment uses (about 3/4 of a keyframe's
+  /// bytes; their matches are then not refined to sub-pixel).
+  void setMemoryPressure(MemoryPressure pressure);
+
   /// End of the run: waits for a whole-graph optimisation in flight and runs any still wanted,
   /// so that optimizedTrajectory() and backend() hold the final poses.
   void finish();
@@ -102,6 +107,7 @@ class BackendStage {
   KeyframeAnchoredTrajectory frames_;
   std::vector<KeyframePoseEntry> keyframes_;  ///< id order; poses filled in on demand
   std::int64_t latest_keyframe_id_ = -1;
+  MemoryPressure memory_pressure_ = MemoryPressure::kNone;
   Utime latest_keyframe_utime_ = 0;
   std::int64_t sequence_ = 0;
   BackendStageStats stats_;

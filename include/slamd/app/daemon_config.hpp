@@ -33,6 +33,7 @@ struct DaemonConfig {
   std::string save_dir = "maps";
   int mapping_nice = 10;
   int backend_nice = 5;
+  int memory_limit_mb = 0;
   int opencv_threads = 0;
   std::string world_frame = "world";
   std::string camera_frame = "camera";

@@ -85,7 +85,13 @@ struct DaemonSummary {
   std::int64_t loops = 0;
   std::int64_t relocalizations = 0;
   std::int64_t optimizations = 0;
-  double max_optimization_ms = 0.0;
+  double max_optimization_ms = 0.0;           ///< in the back-end thread
+  std::int64_t background_optimizations = 0;  ///< whole-graph ones on their own thread
+  double max_background_optimization_ms = 0.0;
+  // Memory (daemon.memory_limit_mb): the largest resident size seen at a status message, and
+  // how many times the pressure level went up.
+  double peak_resident_mb = 0.0;
+  std::uint64_t memory_pressure_raised = 0;
   double duration_s = 0.0;
   double end_to_end_p50_ms = 0.0;
   double end_to_end_p95_ms = 0.0;

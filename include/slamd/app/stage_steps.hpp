@@ -38,6 +38,7 @@
 #include "slamd/app/pose_estimator.hpp"
 #include "slamd/capture/frame_source.hpp"
 #include "slamd/common/latency_histogram.hpp"
+#include "slamd/common/memory_pressure.hpp"
 #include "slamd/common/trajectory.hpp"
 #include "slamd/mapping/mapper.hpp"
 #include "slamd/pipeline/pipeline.hpp"
@@ -356,6 +357,13 @@ class MappingStep : public StepBase {
   /// Serves the waiting map requests (also called by the control thread after the stop).
   void serveRequests();
   MappingStepStats stats() const;
+  /// The level the mapper degrades by (read every cycle; set by the control thread). Under
+  /// kOver, the kept clouds of all but the newest kKeptCloudsOverTheLimit keyframes are
+  /// released.
+  void watchMemoryPressure(const std::atomic<MemoryPressure>* pressure) {
+    memory_pressure_ = pressure;
+  }
+  static constexpr std::size_t kKeptCloudsOverTheLimit = 20;
 
  private:
   void applyCorrections();
@@ -376,6 +384,7 @@ class MappingStep : public StepBase {
   bool snapshot_failing_ = false;  ///< the last periodic snapshot failed
   std::atomic<std::int64_t> leaf_voxels_{0};
   std::atomic<std::int64_t> occupied_voxels_{0};
+  const std::atomic<MemoryPressure>* memory_pressure_ = nullptr;
 };
 
 // --- back end --------------------------------------------------------------------------------
@@ -399,6 +408,10 @@ class BackendStep : public StepBase {
   void reset() override { backend_.reset(); }
   /// Counts for the status message (any thread).
   BackendStepStats stats() const;
+  /// The level the back end degrades by (read on every packet; set by the control thread).
+  void watchMemoryPressure(const std::atomic<MemoryPressure>* pressure) {
+    memory_pressure_ = pressure;
+  }
 
  private:
   BackendStage& backend_;
@@ -409,6 +422,7 @@ class BackendStep : public StepBase {
   std::atomic<std::int32_t> keyframes_{0};
   std::atomic<std::int32_t> loops_{0};
   std::atomic<std::int32_t> relocalizations_{0};
+  const std::atomic<MemoryPressure>* memory_pressure_ = nullptr;
 };
 
 }  // namespace slamd

@@ -72,6 +72,7 @@
 #include "slamd/backend/background_optimizer.hpp"
 #include "slamd/backend/loop_detector.hpp"
 #include "slamd/backend/pose_graph.hpp"
+#include "slamd/common/memory_pressure.hpp"
 #include "slamd/tracking/visual_odometry.hpp"
 
 namespace slamd {
@@ -132,6 +133,11 @@ class Backend {
   bool fullOptimizationPending() const {
     return full_optimization_wanted_ || full_optimization_out_;
   }
+
+  /// Memory pressure (common/memory_pressure.hpp) relaxes the culling rule for new keyframes:
+  /// kNear needs one covering keyframe fewer (at least 1) and at most 80% of the features
+  /// covered; kOver one covering keyframe and at most 70%.
+  void setMemoryPressure(MemoryPressure pressure) { memory_pressure_ = pressure; }
 
   /// Current (corrected) T_world_camera of a keyframe; the odometry pose before any loop. A
   /// culled keyframe's is the pose of the keyframe it was merged into, composed with the offset
@@ -203,6 +209,7 @@ class Backend {
   int num_loops_ = 0;
   int num_local_edges_ = 0;
   int num_relocalizations_ = 0;
+  MemoryPressure memory_pressure_ = MemoryPressure::kNone;
   bool defer_full_optimization_ = false;
   bool full_optimization_wanted_ = false;  ///< deferred: a job should be handed out
   bool full_optimization_out_ = false;     ///< deferred: a job is being optimised elsewhere

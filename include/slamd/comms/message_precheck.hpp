@@ -240,14 +240,15 @@ struct LcmLayout<slamd::status_t> {
     std::int32_t count = 0;
     // utime, num_stages + stages, end_to_end_p50/p95/p99_ms, tracking_state,
     // map_occupied_voxels, map_total_voxels, num_keyframes, num_loops, num_relocalizations,
-    // message
+    // memory_rss_mb, memory_limit_mb, memory_pressure, message
     if (!(w.skip(kInt64) && w.readCount(count, LcmLayout<slamd::stage_status_t>::kMinBytes))) {
       return false;
     }
     for (std::int32_t i = 0; i < count; ++i) {
       if (!LcmLayout<slamd::stage_status_t>::walk(w)) return false;
     }
-    return w.skip(3 * kDouble + kInt8 + 2 * kInt64 + 3 * kInt32) && w.skipString();
+    return w.skip(3 * kDouble + kInt8 + 2 * kInt64 + 3 * kInt32 + kDouble + kInt32 + kInt8) &&
+           w.skipString();
   }
 };
 

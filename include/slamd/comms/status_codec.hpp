@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "slamd/common/memory_pressure.hpp"
 #include "slamd/common/pose_estimate.hpp"
 #include "slamd/pipeline/pipeline.hpp"
 #include "slamd/status_t.hpp"
@@ -29,6 +30,9 @@ struct StatusExtras {
   std::int32_t num_keyframes = 0;
   std::int32_t num_loops = 0;
   std::int32_t num_relocalizations = 0;
+  double memory_rss_mb = 0.0;
+  std::int32_t memory_limit_mb = 0;  ///< 0 = none
+  MemoryPressure memory_pressure = MemoryPressure::kNone;
   std::string message;
 };
 

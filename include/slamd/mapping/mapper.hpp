@@ -49,6 +49,7 @@
 #include <octomap/ColorOcTree.h>
 #include <octomap/OcTree.h>
 
+#include "slamd/common/memory_pressure.hpp"
 #include "slamd/common/rgbd_frame.hpp"
 #include "slamd/common/se3.hpp"
 #include "slamd/mapping/map_io.hpp"
@@ -103,7 +104,8 @@ struct MapperStats {
   std::int64_t snapshot_failures = 0;
   std::int64_t snapshot_retries = 0;  ///< snapshots written early because the previous one failed
   std::int64_t keyframe_clouds = 0;   ///< currently kept
-  std::int64_t keyframe_clouds_refused = 0;  ///< not kept because of the memory budget
+  std::int64_t keyframe_clouds_refused = 0;   ///< not kept: the cloud budget, or memory pressure
+  std::int64_t keyframe_clouds_released = 0;  ///< dropped under memory pressure, left in the map
   std::int64_t keyframe_cloud_bytes = 0;
   std::int64_t keyframes_moved = 0;        ///< contributions moved to corrected poses
   std::int64_t keyframes_taken_out = 0;    ///< contributions removed (forgotten keyframes)
@@ -235,6 +237,13 @@ class Mapper {
   void forgetKeyframe(std::int64_t keyframe_id);
   /// forgetKeyframe() in catchUp()'s steps, before any move.
   void forgetKeyframeInSteps(std::int64_t keyframe_id);
+  /// Memory pressure (common/memory_pressure.hpp): from kNear on, new keyframe clouds are not
+  /// kept (they go in at once, as when the cloud budget refuses them).
+  void setMemoryPressure(MemoryPressure pressure) { memory_pressure_ = pressure; }
+  /// Drops the kept clouds of all but the newest `keep_newest` keyframes (oldest first; only
+  /// clouds wholly in the map with nothing queued). Their part of the map stays, but no later
+  /// correction can move or take it out. Returns how many were dropped.
+  std::size_t releaseKeyframeClouds(std::size_t keep_newest);
   /// Ids of the kept keyframe clouds (forgotten in steps or not yet), in increasing order.
   std::vector<std::int64_t> keptKeyframeIds() const;
   /// Empties the map (the RESET command) and forgets every keyframe cloud.
@@ -328,6 +337,7 @@ class Mapper {
   PointCloud part_;              ///< scratch: one part of a kept cloud
   double last_step_s_ = 0.0;     ///< how long catchUp()'s last step took
   bool voxels_deleted_ = false;  ///< since the last full map request
+  MemoryPressure memory_pressure_ = MemoryPressure::kNone;
   MapperStats stats_;
   bool inner_dirty_ = false;
   int frames_since_prune_ = 0;
