@@ -31,8 +31,8 @@ struct DaemonConfig {
   bool publish_frames = false;
   std::string map_save_path = "slamd_map.bt";
   std::string save_dir = "maps";
-  int mapping_nice = 10;
-  int backend_nice = 5;
+  int mapping_nice = 19;
+  int backend_nice = 19;
   int memory_limit_mb = 0;
   int opencv_threads = 0;
   std::string world_frame = "world";
