@@ -37,9 +37,11 @@ void BackendStage::reset() {
 std::optional<BackendCorrection> BackendStage::process(const EstimatedPacket& packet) {
   std::optional<BackendCorrection> correction;
   if (optimizer_) {
-    // Heartbeats come here too, so a result is merged even while no frames arrive.
-    const Utime utime =
-        packet.frame ? packet.frame->utime : (packet.odometry ? packet.odometry->utime : Utime{0});
+    // Heartbeats come here too, so a result is merged even while no frames arrive; the
+    // correction then carries the newest keyframe's time.
+    const Utime utime = packet.frame
+                            ? packet.frame->utime
+                            : (packet.odometry ? packet.odometry->utime : latest_keyframe_utime_);
     if (std::optional<FullOptimizationJob> done = optimizer_->poll()) {
       correction = mergeFullOptimization(*done, utime);
     }
