@@ -27,9 +27,9 @@ Vector6d noise(std::mt19937& rng, double sigma_m, double sigma_rad) {
   return xi;
 }
 
-PoseGraph makeGraph(int n) {
-  std::mt19937 rng(42);
-  const double radius_m = 0.05 * n / (2.0 * M_PI);  // 5 cm between keyframes
+// n keyframe poses around a horizontal ring, 5 cm apart, each facing along the ring.
+std::vector<SE3, Eigen::aligned_allocator<SE3>> ringTruth(int n) {
+  const double radius_m = 0.05 * n / (2.0 * M_PI);
   std::vector<SE3, Eigen::aligned_allocator<SE3>> truth;
   for (int k = 0; k < n; ++k) {
     const double a = 2.0 * M_PI * k / n;
@@ -38,6 +38,12 @@ PoseGraph makeGraph(int n) {
     T.linear() = expSO3(Eigen::Vector3d(0.0, 0.0, a + M_PI / 2));
     truth.push_back(T);
   }
+  return truth;
+}
+
+PoseGraph makeGraph(int n) {
+  std::mt19937 rng(42);
+  const std::vector<SE3, Eigen::aligned_allocator<SE3>> truth = ringTruth(n);
   Vector6d information_diagonal;
   information_diagonal << Eigen::Vector3d::Constant(1.0 / (0.01 * 0.01)),
       Eigen::Vector3d::Constant(1.0 / (0.005 * 0.005));
@@ -190,15 +196,7 @@ void BM_KeyframeStreamWithFarLoops(benchmark::State& state) {
   constexpr auto kKeyframeSpacing = std::chrono::milliseconds(50);
   const int total = n + kStreamed;
   std::mt19937 rng(42);
-  const double radius_m = 0.05 * total / (2.0 * M_PI);
-  std::vector<SE3, Eigen::aligned_allocator<SE3>> truth;
-  for (int k = 0; k < total; ++k) {
-    const double a = 2.0 * M_PI * k / total;
-    SE3 T = SE3::Identity();
-    T.translation() = Eigen::Vector3d(radius_m * std::cos(a), radius_m * std::sin(a), 0.0);
-    T.linear() = expSO3(Eigen::Vector3d(0.0, 0.0, a + M_PI / 2));
-    truth.push_back(T);
-  }
+  const std::vector<SE3, Eigen::aligned_allocator<SE3>> truth = ringTruth(total);
   Vector6d information_diagonal;
   information_diagonal << Eigen::Vector3d::Constant(1.0 / (0.005 * 0.005)),
       Eigen::Vector3d::Constant(1.0 / (0.003 * 0.003));

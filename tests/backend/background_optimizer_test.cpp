@@ -6,49 +6,10 @@
 
 #include <gtest/gtest.h>
 
+#include "pose_graph_rings.hpp"
+
 namespace slamd {
 namespace {
-
-Matrix6d informationOf(double sigma_m, double sigma_rad) {
-  Vector6d d;
-  d << Eigen::Vector3d::Constant(1.0 / (sigma_m * sigma_m)),
-      Eigen::Vector3d::Constant(1.0 / (sigma_rad * sigma_rad));
-  return d.asDiagonal();
-}
-
-Vector6d noiseSample(std::mt19937& rng, double sigma_m, double sigma_rad) {
-  std::normal_distribution<double> n(0.0, 1.0);
-  Vector6d xi;
-  for (int k = 0; k < 3; ++k) xi(k) = sigma_m * n(rng);
-  for (int k = 3; k < 6; ++k) xi(k) = sigma_rad * n(rng);
-  return xi;
-}
-
-// A ring of n poses 10 cm apart whose odometry drifted, closed by a loop edge from the last pose
-// to the first.
-PoseGraph driftedRing(int n, std::mt19937& rng) {
-  PoseGraph graph;
-  const double radius_m = 0.1 * n / (2.0 * M_PI);
-  std::vector<SE3, Eigen::aligned_allocator<SE3>> truth;
-  for (int k = 0; k < n; ++k) {
-    const double a = 2.0 * M_PI * k / n;
-    SE3 T = SE3::Identity();
-    T.translation() = Eigen::Vector3d(radius_m * std::cos(a), radius_m * std::sin(a), 0.0);
-    T.linear() = expSO3(Eigen::Vector3d(0.0, 0.0, a + M_PI / 2));
-    truth.push_back(T);
-  }
-  SE3 T_world_est = truth[0];
-  graph.addNode(0, T_world_est);
-  for (int k = 1; k < n; ++k) {
-    const SE3 Z = truth[k - 1].inverse() * truth[k] * expSE3(noiseSample(rng, 0.01, 0.005));
-    T_world_est = T_world_est * Z;
-    graph.addNode(k, T_world_est);
-    graph.addEdge({k - 1, k, Z, informationOf(0.01, 0.005), EdgeKind::kOdometry});
-  }
-  graph.addEdge(
-      {0, n - 1, truth[0].inverse() * truth[n - 1], informationOf(0.01, 0.005), EdgeKind::kLoop});
-  return graph;
-}
 
 double maxDifferenceM(const PoseGraph& a, const PoseGraph& b) {
   double worst = 0.0;
@@ -60,7 +21,7 @@ double maxDifferenceM(const PoseGraph& a, const PoseGraph& b) {
 
 TEST(BackgroundOptimizer, GivesTheSolutionOfOptimisingInPlaceAndTakesOneJobAtATime) {
   std::mt19937 rng(7);
-  const PoseGraph ring = driftedRing(300, rng);
+  const PoseGraph ring = test::makeRing(300, rng).graph;
   PoseGraph in_place = ring;
   const PoseGraphResult expected = in_place.optimize(PoseGraphOptions());
   ASSERT_EQ(expected.status, OptimizationStatus::kConverged);
@@ -96,7 +57,7 @@ TEST(BackgroundOptimizer, GivesTheSolutionOfOptimisingInPlaceAndTakesOneJobAtATi
 TEST(BackgroundOptimizer, DestroyingItWithAJobInFlightJoinsTheWorker) {
   std::mt19937 rng(8);
   FullOptimizationJob job;
-  job.graph = driftedRing(500, rng);
+  job.graph = test::makeRing(500, rng).graph;
   job.newest_id = 499;
   BackgroundOptimizer optimizer;
   ASSERT_TRUE(optimizer.submit(std::move(job)));
@@ -105,17 +66,17 @@ TEST(BackgroundOptimizer, DestroyingItWithAJobInFlightJoinsTheWorker) {
 
 TEST(MergeOptimizedCopy, CopiedKeyframesTakeTheirOptimisedPosesAndNewerOnesMoveWithTheNewest) {
   std::mt19937 rng(9);
-  PoseGraph live = driftedRing(120, rng);
+  PoseGraph live = test::makeRing(120, rng).graph;
   FullOptimizationJob job;
   job.graph = live;
   job.newest_id = 119;
   // While the copy is optimised, the live graph moves on: a local window nudged the newest
   // copied keyframe, and three keyframes were added after it.
-  live.setPose(119, live.pose(119) * expSE3(noiseSample(rng, 0.01, 0.005)));
+  live.setPose(119, live.pose(119) * expSE3(test::noiseSample(rng, 0.01, 0.005)));
   for (int k = 120; k < 123; ++k) {
     const SE3 step = expSE3((Vector6d() << 0.1, 0.0, 0.0, 0.0, 0.0, 0.02).finished());
     live.addNode(k, live.pose(k - 1) * step);
-    live.addEdge({k - 1, k, step, informationOf(0.01, 0.005), EdgeKind::kOdometry});
+    live.addEdge({k - 1, k, step, test::informationOf(0.01, 0.005), EdgeKind::kOdometry});
   }
   const SE3 T_119_122_before = live.pose(119).inverse() * live.pose(122);
 

@@ -5,6 +5,8 @@
 
 #include <gtest/gtest.h>
 
+#include "pose_graph_rings.hpp"
+
 namespace slamd {
 namespace {
 
@@ -16,20 +18,14 @@ SE3 randomPose(std::mt19937& rng, double translation_m, double angle_rad) {
   return expSE3(xi);
 }
 
-Vector6d noiseSample(std::mt19937& rng, double sigma_m, double sigma_rad) {
-  std::normal_distribution<double> n(0.0, 1.0);
-  Vector6d xi;
-  for (int k = 0; k < 3; ++k) xi(k) = sigma_m * n(rng);
-  for (int k = 3; k < 6; ++k) xi(k) = sigma_rad * n(rng);
-  return xi;
-}
-
-Matrix6d informationOf(double sigma_m, double sigma_rad) {
-  Vector6d d;
-  d << Eigen::Vector3d::Constant(1.0 / (sigma_m * sigma_m)),
-      Eigen::Vector3d::Constant(1.0 / (sigma_rad * sigma_rad));
-  return d.asDiagonal();
-}
+using test::informationOf;
+using test::kLoopSigmaM;
+using test::kLoopSigmaRad;
+using test::kOdomSigmaM;
+using test::kOdomSigmaRad;
+using test::makeRing;
+using test::noiseSample;
+using test::RingGraph;
 
 TEST(PoseGraph, RightJacobianInverseMatchesCentralDifferences) {
   std::mt19937 rng(42);
@@ -93,50 +89,6 @@ TEST(PoseGraph, RobustKernelsWeightLargeErrorsDown) {
         (2.0 * h);
     EXPECT_NEAR(w, numeric, 1e-6);
   }
-}
-
-// A ring of poses (radius 5 m, gentle height and tilt changes) whose odometry drifts; loop edges
-// tie the end back to the start.
-struct RingGraph {
-  std::vector<SE3, Eigen::aligned_allocator<SE3>> truth;
-  PoseGraph graph;
-};
-
-constexpr double kOdomSigmaM = 0.02;
-constexpr double kOdomSigmaRad = 0.01;
-constexpr double kLoopSigmaM = 0.02;
-constexpr double kLoopSigmaRad = 0.01;
-
-RingGraph makeRing(int n, std::mt19937& rng, double noise_scale = 1.0) {
-  RingGraph ring;
-  for (int k = 0; k < n; ++k) {
-    const double a = 2.0 * M_PI * k / n;
-    SE3 T = SE3::Identity();
-    T.translation() = Eigen::Vector3d(5.0 * std::cos(a), 5.0 * std::sin(a), 0.3 * std::sin(3 * a));
-    T.linear() = expSO3(Eigen::Vector3d(0.05 * std::sin(2 * a), 0.05 * std::cos(a), a + M_PI / 2));
-    ring.truth.push_back(T);
-  }
-  // Initial values always drift (the odometry chain with noise); the measurements carry
-  // noise_scale times that noise (0 = exact measurements).
-  SE3 T_world_est = ring.truth[0];
-  ring.graph.addNode(0, T_world_est);
-  for (int k = 1; k < n; ++k) {
-    const Vector6d noise = noiseSample(rng, kOdomSigmaM, kOdomSigmaRad);
-    const SE3 Z_true = ring.truth[k - 1].inverse() * ring.truth[k];
-    T_world_est = T_world_est * Z_true * expSE3(noise);
-    ring.graph.addNode(k, T_world_est);
-    ring.graph.addEdge({k - 1, k, Z_true * expSE3(noise_scale * noise),
-                        informationOf(kOdomSigmaM, kOdomSigmaRad), EdgeKind::kOdometry});
-  }
-  // Loop edges: the last poses see the first ones.
-  for (int k = 0; k < 4; ++k) {
-    const int i = k;
-    const int j = n - 1 - k;
-    const SE3 Z = ring.truth[i].inverse() * ring.truth[j] *
-                  expSE3(noise_scale * noiseSample(rng, kLoopSigmaM, kLoopSigmaRad));
-    ring.graph.addEdge({i, j, Z, informationOf(kLoopSigmaM, kLoopSigmaRad), EdgeKind::kLoop});
-  }
-  return ring;
 }
 
 double positionErrorM(const RingGraph& ring, int k) {

@@ -72,7 +72,7 @@ class BackendStage {
   std::optional<BackendCorrection> process(const EstimatedPacket& packet);
 
   /// Memory pressure (common/memory_pressure.hpp): the Backend culls harder, and from kNear on
-  /// new keyframes are kept without the image patch alignment uses (about 3/4 of a keyframe's
+  /// new keyframes are kept without the image patch alignment uses (about half of a keyframe's
   /// bytes; their matches are then not refined to sub-pixel).
   void setMemoryPressure(MemoryPressure pressure);
 

@@ -39,7 +39,6 @@ class MemoryGovernor {
   /// The level for this resident size (megabytes), with hysteresis.
   MemoryPressure update(double resident_mb);
   MemoryPressure level() const { return level_; }
-  double limitMb() const { return limit_mb_; }
 
  private:
   double limit_mb_;
