@@ -6,6 +6,7 @@
 
 #include "slamd/app/config_reference.hpp"
 #include "slamd/app/slam_daemon.hpp"
+#include "slamd/backend/session.hpp"
 #include "slamd/capture/frame_source.hpp"
 #include "slamd/common/log.hpp"
 #include "slamd/common/program_options.hpp"
@@ -29,6 +30,10 @@ int main(int argc, char** argv) {
   options.addOption("lcm-url", "URL", "LCM URL (default: lcm.url or $LCM_DEFAULT_URL)");
   options.addOption("trajectory-out", "FILE", "write the trajectory (TUM format) at exit");
   options.addOption("map-out", "FILE.bt", "write the map (.bt or .ot) at exit");
+  options.addOption("session-in", "DIR",
+                    "load the session in DIR at start and localise in its map (backend.mode)");
+  options.addOption("session-out", "DIR",
+                    "write a session to DIR at exit (map, keyframes, pose graph, vocabulary)");
   options.addOption("groundtruth-out", "FILE",
                     "write the source's ground truth (TUM folders, synthetic worlds) at exit");
   options.addOption("metrics-out", "FILE.json",
@@ -67,6 +72,8 @@ int main(int argc, char** argv) {
   overrides.map_out = options.value("map-out");
   overrides.groundtruth_out = options.value("groundtruth-out");
   overrides.metrics_out = options.value("metrics-out");
+  overrides.session_in = options.value("session-in");
+  overrides.session_out = options.value("session-out");
   std::unique_ptr<SlamDaemon> daemon;
   try {
     Config config = options.loadConfig();
@@ -78,6 +85,9 @@ int main(int argc, char** argv) {
   } catch (const SourceError& e) {
     std::cerr << "slamd: source error: " << e.what() << "\n";
     return kExitSourceError;
+  } catch (const SessionError& e) {
+    std::cerr << "slamd: session refused: " << e.what() << "\n";
+    return kExitSessionError;
   } catch (const std::exception& e) {
     std::cerr << "slamd: " << e.what() << "\n";
     return kExitFailure;

@@ -1,6 +1,6 @@
 // slamd-cmd: sends a command to a running slamd daemon.
 //
-//   slamd-cmd save-map [FILE.bt|FILE.ot]   slamd-cmd publish-map
+//   slamd-cmd save-map [FILE.bt|FILE.ot]   slamd-cmd publish-map   slamd-cmd save-session [NAME]
 //   slamd-cmd pause | resume | reset | shutdown
 
 #include <iostream>
@@ -14,8 +14,8 @@
 int main(int argc, char** argv) {
   using namespace slamd;
   ProgramOptions options("slamd-cmd",
-                         "Sends a command to slamd: save-map [FILE], publish-map, pause, resume, "
-                         "reset, shutdown.");
+                         "Sends a command to slamd: save-map [FILE], publish-map, save-session "
+                         "[NAME], pause, resume, reset, shutdown.");
   options.setPositional("COMMAND [ARGUMENT]", 1, 2);
   options.addOption("lcm-url", "URL", "LCM URL (overrides lcm.url)");
   if (!options.parse(argc, argv)) return options.exitCode();
@@ -24,6 +24,7 @@ int main(int argc, char** argv) {
   const std::map<std::string, std::int8_t> commands = {
       {"save-map", std::int8_t{slamd::command_t::SAVE_MAP}},
       {"publish-map", std::int8_t{slamd::command_t::PUBLISH_MAP}},
+      {"save-session", std::int8_t{slamd::command_t::SAVE_SESSION}},
       {"pause", std::int8_t{slamd::command_t::PAUSE}},
       {"resume", std::int8_t{slamd::command_t::RESUME}},
       {"reset", std::int8_t{slamd::command_t::RESET}},

@@ -31,7 +31,19 @@ void BackendStage::reset() {
   keyframes_.clear();
   latest_keyframe_id_ = -1;
   latest_keyframe_utime_ = 0;
+  frames_seen_ = 0;
   stats_ = BackendStageStats();
+  if (restored_) restore(restored_);
+}
+
+void BackendStage::restore(std::shared_ptr<const BackendSnapshot> snapshot) {
+  backend_->restore(*snapshot);
+  restored_ = std::move(snapshot);
+  for (const KeyframePtr& keyframe : restored_->keyframes) {
+    keyframes_.push_back(KeyframePoseEntry{keyframe->id, keyframe->utime, keyframe->segment,
+                                           backend_->pose(keyframe->id)});
+  }
+  stats_.keyframes = static_cast<std::int64_t>(backend_->graph().numNodes());
 }
 
 std::optional<BackendCorrection> BackendStage::process(const EstimatedPacket& packet) {
@@ -90,9 +102,13 @@ std::optional<BackendCorrection> BackendStage::processKeyframe(const EstimatedPa
       stats_.keyframe_bytes += static_cast<std::int64_t>(keyframeBytes(*keyframe));
     }
     stats_.keyframes = static_cast<std::int64_t>(backend_->graph().numNodes());
+    if (restored_ && stats_.frames_before_localization < 0 && backend_->newestKeyframeInMap()) {
+      stats_.frames_before_localization = frames_seen_;
+    }
     if (update.optimized) correction = makeCorrection(update, keyframe->utime);
   }
   frames_.addFrame(odometry, T_world_camera);
+  ++frames_seen_;
   return correction;
 }
 
@@ -144,6 +160,7 @@ BackendCorrection BackendStage::makeCorrection(const BackendUpdate& update, Utim
   correction.T_world_uncorrected = update.T_world_odometry;
   correction.keyframe_poses = update.corrected_poses;
   correction.relocalized = update.relocalized;
+  correction.map_frame_known = backend_->newestKeyframeInMap();
   KeyframeTrajectory& trajectory = correction.trajectory;
   trajectory.utime = utime;
   trajectory.sequence = sequence_++;

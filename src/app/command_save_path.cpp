@@ -13,8 +13,8 @@ bool endsWith(const std::string& text, const std::string& suffix) {
          text.compare(text.size() - suffix.size(), suffix.size(), suffix) == 0;
 }
 
-/// Empty when `name` is an acceptable map file name, else why not.
-std::string checkFileName(const std::string& name) {
+/// Empty when `name` is an acceptable file or folder name, else why not.
+std::string checkName(const std::string& name) {
   if (name.empty() || name.size() > 128) return "the file name must have 1 to 128 characters";
   if (name.front() == '.') return "the file name must not start with '.'";
   for (const char c : name) {
@@ -22,6 +22,12 @@ std::string checkFileName(const std::string& name) {
                          (c >= '0' && c <= '9') || c == '.' || c == '_' || c == '-';
     if (!allowed) return "the file name may hold only letters, digits, '.', '_' and '-'";
   }
+  return {};
+}
+
+/// Empty when `name` is an acceptable map file name, else why not.
+std::string checkFileName(const std::string& name) {
+  if (std::string problem = checkName(name); !problem.empty()) return problem;
   if (!endsWith(name, ".bt") && !endsWith(name, ".ot")) return "the file must end in .bt or .ot";
   return {};
 }
@@ -62,6 +68,25 @@ std::optional<std::string> resolveCommandSavePath(const std::string& argument,
     return std::nullopt;
   }
   return (fs::path(save_dir) / name).string();
+}
+
+std::optional<std::string> resolveCommandSessionPath(const std::string& argument,
+                                                     const std::string& save_dir,
+                                                     std::string& error) {
+  const std::string refused = "SAVE_SESSION '" + printableExcerpt(argument) + "' refused: ";
+  if (save_dir.empty()) {
+    error = refused + "daemon.save_dir is empty, so commands may not name a folder";
+    return std::nullopt;
+  }
+  if (argument.find('/') != std::string::npos) {
+    error = refused + "give a bare folder name (made inside daemon.save_dir)";
+    return std::nullopt;
+  }
+  if (const std::string problem = checkName(argument); !problem.empty()) {
+    error = refused + problem;
+    return std::nullopt;
+  }
+  return (std::filesystem::path(save_dir) / argument).string();
 }
 
 }  // namespace slamd

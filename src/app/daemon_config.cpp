@@ -12,6 +12,12 @@ const ConfigSchema<DaemonConfig>& DaemonConfig::schema() {
           .text("trajectory_out", &C::trajectory_out,
                 "TUM trajectory written at exit (--trajectory-out); empty = none")
           .text("map_out", &C::map_out, "map (.bt or .ot) written at exit (--map-out)")
+          .text("session_in", &C::session_in,
+                "session folder to load at start (--session-in): its map, keyframes and pose "
+                "graph; the run localises in it (backend.mode); empty = none")
+          .text("session_out", &C::session_out,
+                "session folder written at exit (--session-out), atomically: what a later run "
+                "needs to localise in this map and extend it; empty = none")
           .text("groundtruth_out", &C::groundtruth_out,
                 "the source's ground truth (TUM folders, synthetic worlds) written at exit in TUM "
                 "format (--groundtruth-out)")

@@ -7,6 +7,8 @@
 #include <chrono>
 #include <filesystem>
 #include <fstream>
+#include <functional>
+#include <future>
 #include <limits>
 #include <sstream>
 
@@ -16,6 +18,7 @@
 #include "slamd/app/command_save_path.hpp"
 #include "slamd/app/daemon_config.hpp"
 #include "slamd/app/stage_steps.hpp"
+#include "slamd/backend/session.hpp"
 #include "slamd/command_t.hpp"
 #include "slamd/common/file_io.hpp"
 #include "slamd/common/log.hpp"
@@ -122,6 +125,22 @@ struct SlamDaemon::Impl {
   std::unique_ptr<BackendStage> backend;
   /// Built by run() once the LCM bus is up.
   std::unique_ptr<DaemonSteps> steps;
+  /// The back end's vocabulary (null without a back end).
+  std::shared_ptr<const Vocabulary> vocabulary;
+  /// The session loaded (--session-in); its back end and map moved into the stages at start.
+  std::unique_ptr<Session> session;
+  /// Control loop (producer) -> back-end thread (consumer): SAVE_SESSION's snapshot requests.
+  SpscQueue<SnapshotRequest> snapshot_requests{4};
+  /// A SAVE_SESSION waiting for the back end's snapshot and the mapping thread's map file
+  /// (control thread).
+  struct SessionSave {
+    std::string dir;
+    std::future<std::shared_ptr<const BackendSnapshot>> snapshot;
+    std::future<SavedMap> map;  ///< not valid without a mapper
+    std::string map_path;       ///< where the mapping thread writes it
+    std::int64_t started_ns = 0;
+  };
+  std::optional<SessionSave> session_save;
 
   /// Commands from the LCM receive thread (producer) to the control loop (consumer).
   SpscQueue<slamd::command_t> commands{kCommandQueueCapacity};
@@ -147,6 +166,8 @@ struct SlamDaemon::Impl {
     if (!overrides.map_out.empty()) daemon.map_out = overrides.map_out;
     if (!overrides.groundtruth_out.empty()) daemon.groundtruth_out = overrides.groundtruth_out;
     if (!overrides.metrics_out.empty()) daemon.metrics_out = overrides.metrics_out;
+    if (!overrides.session_in.empty()) daemon.session_in = overrides.session_in;
+    if (!overrides.session_out.empty()) daemon.session_out = overrides.session_out;
     if (!overrides.lcm_url.empty()) config.set("lcm.url", overrides.lcm_url);
     checkOutputsAreDistinct();
     memory_governor = MemoryGovernor(daemon.memory_limit_mb);
@@ -161,18 +182,28 @@ struct SlamDaemon::Impl {
     if (mapping_config.keep_keyframe_clouds) mapping_config.keyframes_only = true;
     if (daemon.publish_frames) frame_publisher_config = LcmFramePublisherConfig::load(config);
     if (mapping_config.enabled) mapper = std::make_unique<Mapper>(mapping_config);
+    if (!backend_config.enabled && !(daemon.session_in.empty() && daemon.session_out.empty())) {
+      throw ConfigError("sessions (--session-in, --session-out) need the back end: set "
+                        "backend.enabled=true");
+    }
     if (backend_config.enabled) {
-      std::shared_ptr<const Vocabulary> vocabulary;
-      try {
-        vocabulary = loadVocabulary(backend_config);
-      } catch (const VocabularyError& e) {
-        throw ConfigError(std::string("backend.vocabulary_file: ") + e.what());
+      if (!daemon.session_in.empty()) {
+        // A loaded session brings its own vocabulary: its keyframes' words come from it.
+        session = std::make_unique<Session>(loadSession(daemon.session_in));
+        vocabulary = session->vocabulary;
+      } else {
+        try {
+          vocabulary = loadVocabulary(backend_config);
+        } catch (const VocabularyError& e) {
+          throw ConfigError(std::string("backend.vocabulary_file: ") + e.what());
+        }
       }
-      backend = std::make_unique<BackendStage>(backend_config, std::move(vocabulary));
+      backend = std::make_unique<BackendStage>(backend_config, vocabulary);
     }
     // The source reads its own sections (camera.*, capture.*, synthetic.*) now, so that every
     // configuration error surfaces before anything starts.
     source = createFrameSource(daemon.source, config);
+    if (session) restoreSession();
     if (overrides.wrap_source) source = overrides.wrap_source(std::move(source));
     removeStaleTemporaryFilesOfOutputs();
   }
@@ -205,6 +236,20 @@ struct SlamDaemon::Impl {
                   const LcmBus& bus) const;
   int writeOutputs();
   void finishBackend();
+  /// Checks the loaded session against the camera and hands its back end and map to the
+  /// stages; throws SessionError.
+  void restoreSession();
+  /// Writes the session (--session-out) from the stopped pipeline's state; false (logged) when
+  /// it could not be written.
+  bool saveSession(const std::string& dir);
+  /// Writes a session of `snapshot`, the map through `save_map` (which writes it to the path
+  /// given); false (logged) when it could not be written.
+  bool writeSession(const std::string& dir, const BackendSnapshot& snapshot,
+                    const std::function<SavedMap(const std::string&)>& save_map);
+  /// SAVE_SESSION: asks the back-end and mapping threads for their parts...
+  void startSessionSave(const slamd::command_t& command);
+  /// ...and writes the session once both are in (called by the control loop).
+  void progressSessionSave();
   /// False (logged) when the file could not be written.
   bool writeMetrics(const std::vector<StageStats>& stats);
   void logTrackingSummary() const;
@@ -277,6 +322,9 @@ void SlamDaemon::Impl::handleCommands(ShutdownSignals& signals) {
       case slamd::command_t::SAVE_MAP:
       case slamd::command_t::PUBLISH_MAP:
         handleMapCommand(*command);
+        break;
+      case slamd::command_t::SAVE_SESSION:
+        startSessionSave(*command);
         break;
       default:
         SLAMD_LOG_WARN(kLog) << "unknown command " << static_cast<int>(command->command)
@@ -452,6 +500,11 @@ void SlamDaemon::Impl::buildSteps(LcmBus& bus, DaemonPublisher& publisher) {
   s.capture.emplace(*source, static_cast<std::int64_t>(daemon.heartbeat_period_s * 1e9),
                     std::move(republish));
   s.tracking.emplace(tracking_config);
+  if (session) {
+    // The run's keyframes and segments continue the session's numbering.
+    s.tracking->continueNumbering(backend->backend().nextKeyframeId(),
+                                  backend->backend().nextSegment());
+  }
   // Vanishing points: detected on their own thread in parallel with tracking, joined to the
   // tracked frame by the filter.
   const bool vanishing_point_thread =
@@ -465,15 +518,18 @@ void SlamDaemon::Impl::buildSteps(LcmBus& bus, DaemonPublisher& publisher) {
   s.filter.emplace(filter_config, vanishing_point_thread ? &s.vanishing_points : nullptr, wait);
   s.publish.emplace(publisher, daemon.world_frame, daemon.camera_frame,
                     backend ? &s.pose_corrections : nullptr);
+  if (session) s.publish->awaitMapFrame();
   if (mapper) {
     s.mapping.emplace(*mapper, mapping_config, publisher, backend ? &s.map_corrections : nullptr,
                       &map_requests);
     s.mapping->watchMemoryPressure(&memory_pressure);
+    if (session) s.mapping->useLoadedMap(backend_config.mode == BackendMode::kLocalize);
   }
   if (backend) {
     s.backend.emplace(*backend, daemon.world_frame, publisher, &s.pose_corrections,
                       mapper ? &s.map_corrections : nullptr);
     s.backend->watchMemoryPressure(&memory_pressure);
+    s.backend->serveSnapshots(&snapshot_requests);
   }
 }
 
@@ -544,6 +600,7 @@ std::string SlamDaemon::Impl::controlLoop(ShutdownSignals& signals, LcmBus& bus,
                                     : "SHUTDOWN command";
     }
     handleCommands(signals);
+    progressSessionSave();
     if (steadyNowNs() >= next_status_ns) {
       publishStatus(bus, status_builder, pipeline, steps->capture->paused() ? "paused" : "");
       next_status_ns += status_period_ns;
@@ -588,10 +645,23 @@ int SlamDaemon::Impl::run(ShutdownSignals& signals) {
   summarize(stats, source_stats, *bus, start_ns);
   logSummary(stats, source_stats, *bus);
   if (backend) finishBackend();
+  // A SAVE_SESSION still waiting when the pipeline stopped is saved from the final state (the
+  // threads that would have served it are gone).
+  std::string command_session_dir;
+  if (session_save) {
+    command_session_dir = session_save->dir;
+    session_save.reset();
+  }
+  const bool command_session_saved =
+      command_session_dir.empty() || command_session_dir == daemon.session_out ||
+      saveSession(command_session_dir);
+  const bool session_saved = (daemon.session_out.empty() || saveSession(daemon.session_out)) &&
+                             command_session_saved;
   const bool metrics_written = daemon.metrics_out.empty() || writeMetrics(stats);
   const int outputs = writeOutputs();
   steps.reset();  // before the bus its frame publisher uses
-  return outputs != kExitOk ? outputs : metrics_written ? kExitOk : kExitOutputError;
+  if (outputs != kExitOk) return outputs;
+  return metrics_written && session_saved ? kExitOk : kExitOutputError;
 }
 
 void SlamDaemon::Impl::summarize(const std::vector<StageStats>& stats,
@@ -625,6 +695,7 @@ void SlamDaemon::Impl::summarize(const std::vector<StageStats>& stats,
   summary.poses_predicted = tally.predicted.load();
   summary.poses_lost = tally.lost.load();
   summary.poses_not_initialized = tally.not_initialized.load();
+  summary.poses_not_localized = tally.not_localized.load();
   summary.implausible_estimates = steps->tracking->implausibleEstimates();
   summary.prior_disagreements = steps->tracking->priorDisagreements();
   summary.dense_aligned_frames = steps->tracking->denseAlignedFrames();
@@ -884,6 +955,16 @@ void SlamDaemon::Impl::finishBackend() {
   summary.optimizations = stats.optimizations;
   summary.max_optimization_ms = stats.max_optimization_ms;
   summary.culled_keyframes = stats.culled_keyframes;
+  summary.frames_before_localization = stats.frames_before_localization;
+  if (session) {
+    if (stats.frames_before_localization >= 0) {
+      SLAMD_LOG_INFO(kLog) << "session: localised in the loaded map at frame "
+                           << stats.frames_before_localization << " of this run";
+    } else {
+      SLAMD_LOG_WARN(kLog) << "session: this run was never localised in the loaded map; its "
+                              "trajectory is in its own frame (its first camera pose)";
+    }
+  }
   summary.keyframe_bytes = stats.keyframe_bytes;
   summary.background_optimizations = stats.background_optimizations;
   summary.max_background_optimization_ms = stats.max_background_optimization_ms;
@@ -917,6 +998,167 @@ void SlamDaemon::Impl::finishBackend() {
                          << caught_up.keyframes_moved << " moved to their optimised poses in "
                          << caught_up.seconds << " s (" << mapper->stats().keyframes_moved
                          << " moves during the run)";
+  }
+}
+
+void SlamDaemon::Impl::restoreSession() {
+  const std::optional<CameraIntrinsics> camera = source->intrinsics();
+  if (camera) {
+    const std::string mismatch = cameraMismatch(session->info.camera, *camera);
+    if (!mismatch.empty()) {
+      throw SessionError("session " + session->generation_path + " was made with another camera (" +
+                         mismatch + "); its map cannot be localised in with " + daemon.source);
+    }
+  }
+  backend->restore(std::make_shared<const BackendSnapshot>(std::move(session->backend)));
+  if (mapper && !session->map_path.empty()) {
+    const MapFileResult loaded = mapper->loadMap(session->map_path);
+    if (!loaded.ok) throw SessionError("session map " + session->map_path + ": " + loaded.error);
+  }
+  SLAMD_LOG_INFO(kLog) << "session " << session->generation_path << " loaded ("
+                       << session->info.keyframes << " keyframes, " << session->info.landmarks
+                       << " landmarks, " << session->info.map_voxels << " map voxels, made "
+                       << session->info.created_by << "); mode "
+                       << backendModeName(backend_config.mode)
+                       << ": poses are TRACKING_NOT_LOCALIZED until the first relocalisation";
+  session->backend = BackendSnapshot();  // moved into the back end
+}
+
+bool SlamDaemon::Impl::saveSession(const std::string& dir) {
+  const auto start = std::chrono::steady_clock::now();
+  const BackendSnapshot snapshot = backend->backend().snapshot();
+  const bool saved = writeSession(dir, snapshot, [this](const std::string& path) {
+    return saveMapForSession(*mapper, path);
+  });
+  if (saved) {
+    SLAMD_LOG_INFO(kLog) << "session written to " << dir << " in "
+                         << std::chrono::duration<double>(std::chrono::steady_clock::now() - start)
+                                .count()
+                         << " s";
+  }
+  return saved;
+}
+
+bool SlamDaemon::Impl::writeSession(const std::string& dir, const BackendSnapshot& snapshot,
+                                    const std::function<SavedMap(const std::string&)>& save_map) {
+  try {
+    SessionWriter writer(dir);
+    writer.writeBackend(snapshot);
+    writer.writeVocabulary(*vocabulary);
+    SessionInfo info;
+    info.created_utime = wallClockUtime();
+    info.created_by = std::string("slamd ") + SLAMD_VERSION_STRING;
+    if (const std::optional<CameraIntrinsics> camera = source->intrinsics()) {
+      info.camera = *camera;
+    } else if (!snapshot.keyframes.empty()) {
+      info.camera = snapshot.keyframes.front()->intrinsics;
+    }
+    summarizeSnapshot(snapshot, info);
+    if (mapper) {
+      const SavedMap map = save_map(writer.pathFor(kSessionMapFile));
+      if (!map.file.ok) throw SessionError("cannot write the session's map: " + map.file.error);
+      writer.addFile(kSessionMapFile);
+      info.map_voxels = map.voxels;
+      info.map_min_m = map.min_m;
+      info.map_max_m = map.max_m;
+    }
+    writer.writeText(kSessionConfigFile, config.effectiveYaml());
+    writer.commit(info);
+    SLAMD_LOG_INFO(kLog) << "session: " << info.keyframes << " keyframes, " << info.landmarks
+                         << " landmarks, " << info.map_voxels << " map voxels in "
+                         << writer.generationPath();
+    return true;
+  } catch (const SessionError& e) {
+    SLAMD_LOG_ERROR(kLog) << "session not saved: " << e.what();
+    return false;
+  }
+}
+
+void SlamDaemon::Impl::startSessionSave(const slamd::command_t& command) {
+  if (!backend) {
+    SLAMD_LOG_WARN(kLog) << "SAVE_SESSION ignored: the back end is off (backend.enabled)";
+    return;
+  }
+  if (session_save) {
+    SLAMD_LOG_WARN(kLog) << "SAVE_SESSION ignored: a session is being saved to "
+                         << session_save->dir;
+    return;
+  }
+  std::string dir = daemon.session_out.empty()
+                        ? (std::filesystem::path(daemon.save_dir) / "session").string()
+                        : daemon.session_out;
+  if (!command.argument.empty()) {
+    // The folder named by a peer on the network: confined to daemon.save_dir.
+    std::string error;
+    const std::optional<std::string> path =
+        resolveCommandSessionPath(command.argument, daemon.save_dir, error);
+    if (!path) {
+      commands_refused.fetch_add(1, std::memory_order_relaxed);
+      SLAMD_LOG_WARN(kLog) << error;
+      return;
+    }
+    dir = *path;
+  }
+  SessionSave save;
+  save.dir = dir;
+  save.started_ns = steadyNowNs();
+  auto snapshot = std::make_shared<std::promise<std::shared_ptr<const BackendSnapshot>>>();
+  save.snapshot = snapshot->get_future();
+  if (!snapshot_requests.tryPush(std::move(snapshot))) {
+    SLAMD_LOG_WARN(kLog) << "SAVE_SESSION dropped: too many pending snapshot requests";
+    return;
+  }
+  if (mapper) {
+    // The mapping thread writes the map next to the session; it joins the generation once the
+    // back end's snapshot is in.
+    std::error_code ignored;
+    std::filesystem::create_directories(dir, ignored);
+    save.map_path = (std::filesystem::path(dir) / "map.pending.ot").string();
+    MapRequest request;
+    request.kind = MapRequest::Kind::kSave;
+    request.path = save.map_path;
+    request.saved = std::make_shared<std::promise<SavedMap>>();
+    save.map = request.saved->get_future();
+    if (!map_requests.tryPush(std::move(request))) {
+      SLAMD_LOG_WARN(kLog) << "SAVE_SESSION dropped: too many pending map requests";
+      return;
+    }
+  }
+  SLAMD_LOG_INFO(kLog) << "command SAVE_SESSION " << dir;
+  session_save = std::move(save);
+}
+
+void SlamDaemon::Impl::progressSessionSave() {
+  if (!session_save) return;
+  const auto ready = [](const auto& future) {
+    return future.wait_for(std::chrono::seconds(0)) == std::future_status::ready;
+  };
+  if (!ready(session_save->snapshot) || (session_save->map.valid() && !ready(session_save->map))) {
+    return;
+  }
+  SessionSave save = std::move(*session_save);
+  session_save.reset();
+  const std::shared_ptr<const BackendSnapshot> snapshot = save.snapshot.get();
+  std::optional<SavedMap> map;
+  if (save.map.valid()) map = save.map.get();
+  const bool saved =
+      writeSession(save.dir, *snapshot, [&map, &save](const std::string& path) {
+        SavedMap moved = *map;
+        if (moved.file.ok) {
+          std::error_code error;
+          std::filesystem::rename(save.map_path, path, error);
+          if (error) {
+            moved.file.ok = false;
+            moved.file.error = "cannot move " + save.map_path + " to " + path + ": " +
+                               error.message();
+          }
+        }
+        return moved;
+      });
+  if (saved) {
+    SLAMD_LOG_INFO(kLog) << "SAVE_SESSION: session written to " << save.dir << " in "
+                         << static_cast<double>(steadyNowNs() - save.started_ns) * 1e-9
+                         << " s";
   }
 }
 

@@ -214,6 +214,12 @@ PublishStep::PublishStep(DaemonPublisher& publisher, std::string world_frame,
 void PublishStep::reset() {
   correction_ = SE3::Identity();
   corrected_ = false;
+  awaiting_map_frame_ = localizes_in_loaded_map_;
+}
+
+void PublishStep::awaitMapFrame() {
+  localizes_in_loaded_map_ = true;
+  awaiting_map_frame_ = true;
 }
 
 void PublishStep::process(EstimatedPacket packet) {
@@ -221,6 +227,7 @@ void PublishStep::process(EstimatedPacket packet) {
   corrections_.take(resetEpoch(), [this](PoseCorrection correction) {
     correction_ = correction.T_world_uncorrected;
     relocalized_ = relocalized_ || correction.relocalized;
+    if (correction.map_frame_known) awaiting_map_frame_ = false;
     corrected_ = true;
   });
   if (!packet.frame || !packet.odometry) return;
@@ -236,13 +243,20 @@ void PublishStep::process(EstimatedPacket packet) {
   pose.parent_frame = world_frame_;
   pose.child_frame = camera_frame_;
   tally_.record(pose.tracking_state, pose.utime);
+  // Not yet in the loaded map's frame: said on every pose that has one (a lost pose says lost).
+  if (awaiting_map_frame_ && pose.tracking_state != TrackingState::kLost &&
+      pose.tracking_state != TrackingState::kNotInitialized) {
+    pose.tracking_state = TrackingState::kNotLocalized;
+    tally_.not_localized.fetch_add(1, std::memory_order_relaxed);
+  }
   publisher_.publishPose(pose);
   end_to_end_.recordNs(steadyNowNs() - packet.frame->received_steady_ns);
   publisher_.publishOdometry(*packet.odometry);
   if (packet.vanishing_point) publisher_.publishVanishingPoint(pose.utime, *packet.vanishing_point);
   // A lost pose, or the placeholder before tracking could start, is not an estimate.
   if (pose.tracking_state != TrackingState::kLost &&
-      pose.tracking_state != TrackingState::kNotInitialized) {
+      pose.tracking_state != TrackingState::kNotInitialized &&
+      pose.tracking_state != TrackingState::kNotLocalized) {
     trajectory_.push_back(StampedPose{utimeToSeconds(pose.utime), pose.T_world_camera});
   }
 }
@@ -263,6 +277,11 @@ void MappingStep::reset() {
   T_world_uncorrected_ = SE3::Identity();
 }
 
+void MappingStep::useLoadedMap(bool frozen) {
+  map_frozen_ = frozen;
+  awaiting_map_frame_ = true;
+}
+
 MappingStepStats MappingStep::stats() const {
   return MappingStepStats{leaf_voxels_.load(std::memory_order_relaxed),
                           occupied_voxels_.load(std::memory_order_relaxed)};
@@ -273,6 +292,7 @@ void MappingStep::applyCorrections() {
   corrections_.take(resetEpoch(),
                     [&newest](MapCorrection item) { newest = std::move(item.correction); });
   if (newest) {
+    if (newest->map_frame_known) awaiting_map_frame_ = false;
     forgetCulledKeyframes(newest->keyframe_poses);
     T_world_uncorrected_ = newest->T_world_uncorrected;
     const KeyframeCorrectionResult corrected = mapper_.correctKeyframePoses(newest->keyframe_poses);
@@ -311,11 +331,29 @@ void MappingStep::forgetCulledKeyframes(
   }
 }
 
+SavedMap saveMapForSession(Mapper& mapper, const std::string& path) {
+  SavedMap saved;
+  saved.file = mapper.saveMap(path);
+  const auto describe = [&saved](const auto& tree) {
+    saved.voxels = static_cast<std::int64_t>(tree.getNumLeafNodes());
+    if (tree.size() == 0) return;
+    tree.getMetricMin(saved.min_m.x(), saved.min_m.y(), saved.min_m.z());
+    tree.getMetricMax(saved.max_m.x(), saved.max_m.y(), saved.max_m.z());
+  };
+  if (const octomap::OcTree* tree = mapper.ocTree()) describe(*tree);
+  if (const octomap::ColorOcTree* tree = mapper.colorOcTree()) describe(*tree);
+  return saved;
+}
+
 void MappingStep::serveRequests() {
   if (requests_ == nullptr) return;
   while (auto request = requests_->tryPop()) {
     if (request->kind == MapRequest::Kind::kPublish) {
       publisher_.publishFullMap(mapper_.fullMap());
+      continue;
+    }
+    if (request->saved) {
+      request->saved->set_value(saveMapForSession(mapper_, request->path));
       continue;
     }
     const MapFileResult saved = mapper_.saveMap(request->path);
@@ -356,7 +394,8 @@ void MappingStep::process(const EstimatedPacket& packet) {
   }
   applyCorrections();
   serveRequests();
-  if (packet.frame && packet.odometry && packet.pose.tracking_state != TrackingState::kLost &&
+  if (!map_frozen_ && !awaiting_map_frame_ && packet.frame && packet.odometry &&
+      packet.pose.tracking_state != TrackingState::kLost &&
       packet.pose.tracking_state != TrackingState::kNotInitialized &&
       (!keyframes_only_ || packet.odometry->is_keyframe)) {
     std::optional<std::int64_t> keyframe_id;
@@ -415,6 +454,11 @@ void BackendStep::process(const EstimatedPacket& packet) {
   if (memory_pressure_ != nullptr) {
     backend_.setMemoryPressure(memory_pressure_->load(std::memory_order_relaxed));
   }
+  if (snapshot_requests_ != nullptr) {
+    while (std::optional<SnapshotRequest> request = snapshot_requests_->tryPop()) {
+      (*request)->set_value(std::make_shared<const BackendSnapshot>(backend_.backend().snapshot()));
+    }
+  }
   std::optional<BackendCorrection> correction = backend_.process(packet);
   const BackendStageStats& stats = backend_.stats();
   keyframes_.store(static_cast<std::int32_t>(stats.keyframes), std::memory_order_relaxed);
@@ -426,7 +470,8 @@ void BackendStep::process(const EstimatedPacket& packet) {
   publisher_.publishKeyframes(correction->trajectory);
   if (pose_corrections_ &&
       !pose_corrections_->tryPush(
-          PoseCorrection{correction->T_world_uncorrected, correction->relocalized, resetEpoch()})) {
+          PoseCorrection{correction->T_world_uncorrected, correction->relocalized,
+                         correction->map_frame_known, resetEpoch()})) {
     // Cannot happen while the publish step keeps up (it drains on every frame); if it does,
     // the next correction replaces this one anyway.
     SLAMD_LOG_WARN(kLog) << "pose correction not handed to the publish step: queue full";

@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <stdexcept>
+#include <string>
 
 namespace slamd {
 
@@ -278,6 +280,7 @@ void Backend::cull(const Keyframe& keyframe, const LoopDetection& match, Backend
     list.erase(std::remove(list.begin(), list.end(), keyframe.id), list.end());
   }
   neighbours_.erase(keyframe.id);
+  headers_.erase(keyframe.id);
   detector_.removeKeyframe(keyframe.id);
   const PoseGraphEdge match_to_keyframe{match.match_id, keyframe.id, T_match_keyframe,
                                         match.information, EdgeKind::kLocal};
@@ -343,6 +346,17 @@ BackendUpdate Backend::add(const KeyframePtr& keyframe, const Matrix6d* covarian
   if (first_keyframe) {
     graph_.addNode(keyframe->id, keyframe->T_world_camera);
     first_segment_ = keyframe->segment;
+  } else if (restored_link_pending_) {
+    // The first keyframe after a loaded session: its run's world has no known relation to the
+    // session's until it relocalises. It starts at its own odometry pose (T_world_odometry is
+    // the identity until then), with the weak link to keep the graph connected.
+    restored_link_pending_ = false;
+    new_segment = true;
+    relocalization_attempts_ = 0;
+    graph_.addNode(keyframe->id, keyframe->T_world_camera);
+    addEdge({previous_->id, keyframe->id,
+             graph_.pose(previous_->id).inverse() * keyframe->T_world_camera,
+             Matrix6d::Identity() / (kSegmentLinkSigma * kSegmentLinkSigma), EdgeKind::kOdometry});
   } else {
     new_segment = keyframe->segment != previous_->segment;
     if (new_segment) relocalization_attempts_ = 0;
@@ -352,7 +366,12 @@ BackendUpdate Backend::add(const KeyframePtr& keyframe, const Matrix6d* covarian
     addEdge(edge);
   }
   keyframes_[keyframe->id] = info;
+  headers_[keyframe->id] = KeyframeHeader{keyframe->utime, keyframe->frame_sequence,
+                                          keyframe->T_world_camera, keyframe->intrinsics,
+                                          keyframe->median_depth_m};
   segment_parent_.emplace(keyframe->segment, keyframe->segment);
+  next_keyframe_id_ = std::max(next_keyframe_id_, keyframe->id + 1);
+  next_segment_ = std::max(next_segment_, keyframe->segment + 1);
 
   bool changed = false;
   bool full = false;  // a correction the local window cannot absorb
@@ -425,6 +444,116 @@ BackendUpdate Backend::add(const KeyframePtr& keyframe, const Matrix6d* covarian
   update.relocalization_pending = segmentRoot(keyframe->segment) != segmentRoot(first_segment_);
   update.T_world_odometry = pose(keyframe->id) * keyframe->T_world_camera.inverse();
   return update;
+}
+
+BackendSnapshot Backend::snapshot() const {
+  BackendSnapshot snapshot;
+  const auto features = detector_.storedFeatures();
+  snapshot.keyframes.reserve(graph_.numNodes());
+  snapshot.nodes.reserve(graph_.numNodes());
+  for (std::int64_t id : graph_.nodeIds()) {
+    snapshot.nodes.push_back({id, graph_.pose(id), graph_.isFixed(id)});
+    auto keyframe = std::make_shared<Keyframe>();
+    keyframe->id = id;
+    keyframe->segment = keyframes_.at(id).segment;
+    const KeyframeHeader& header = headers_.at(id);
+    keyframe->utime = header.utime;
+    keyframe->frame_sequence = header.frame_sequence;
+    keyframe->T_world_camera = header.T_world_camera;
+    keyframe->intrinsics = header.intrinsics;
+    keyframe->median_depth_m = header.median_depth_m;
+    const auto stored = features.find(id);
+    if (stored != features.end()) {
+      keyframe->features = *stored->second;
+      keyframe->features.gray = cv::Mat();
+      keyframe->features.align_gray = cv::Mat();
+    }
+    snapshot.keyframes.push_back(std::move(keyframe));
+  }
+  snapshot.edges = graph_.edges();
+  for (const auto& [id, culled] : culled_) {
+    snapshot.culled.push_back({id, culled.anchor_id, culled.T_anchor_keyframe, culled.information});
+  }
+  std::sort(snapshot.culled.begin(), snapshot.culled.end(),
+            [](const CulledKeyframeRecord& a, const CulledKeyframeRecord& b) { return a.id < b.id; });
+  for (const auto& [id, info] : keyframes_) {
+    snapshot.records.push_back({id, info.segment, info.path_length_m});
+  }
+  std::sort(snapshot.records.begin(), snapshot.records.end(),
+            [](const KeyframeRecord& a, const KeyframeRecord& b) { return a.id < b.id; });
+  snapshot.segment_parents.assign(segment_parent_.begin(), segment_parent_.end());
+  std::sort(snapshot.segment_parents.begin(), snapshot.segment_parents.end());
+  snapshot.first_segment = first_segment_;
+  snapshot.next_keyframe_id = next_keyframe_id_;
+  snapshot.next_segment = next_segment_;
+  snapshot.num_loops = num_loops_;
+  snapshot.num_local_edges = num_local_edges_;
+  snapshot.num_relocalizations = num_relocalizations_;
+  return snapshot;
+}
+
+void Backend::restore(const BackendSnapshot& snapshot) {
+  if (previous_ != nullptr || graph_.numNodes() != 0 || !keyframes_.empty()) {
+    throw std::logic_error("Backend::restore: the back end is not empty");
+  }
+  if (snapshot.keyframes.empty() || snapshot.keyframes.size() != snapshot.nodes.size()) {
+    throw std::invalid_argument("Backend::restore: a snapshot needs one keyframe per graph node");
+  }
+  std::unordered_map<std::int64_t, KeyframeInfo> records;
+  for (const KeyframeRecord& record : snapshot.records) {
+    records[record.id] = KeyframeInfo{record.segment, record.path_length_m};
+  }
+  for (std::size_t i = 0; i < snapshot.nodes.size(); ++i) {
+    const BackendSnapshot::Node& node = snapshot.nodes[i];
+    const KeyframePtr& keyframe = snapshot.keyframes[i];
+    if (keyframe == nullptr || keyframe->id != node.id || graph_.hasNode(node.id) ||
+        records.count(node.id) == 0) {
+      throw std::invalid_argument("Backend::restore: keyframe " + std::to_string(node.id) +
+                                  " does not match its graph node or record");
+    }
+    graph_.addNode(node.id, node.T_world_camera);
+    // The loaded map is the frame of reference (see the class comment).
+    graph_.setFixed(node.id, true);
+    keyframes_[node.id] = records.at(node.id);
+    headers_[node.id] = KeyframeHeader{keyframe->utime, keyframe->frame_sequence,
+                                       keyframe->T_world_camera, keyframe->intrinsics,
+                                       keyframe->median_depth_m};
+    segment_parent_.emplace(keyframe->segment, keyframe->segment);
+    detector_.insertKeyframe(*keyframe);
+  }
+  for (const PoseGraphEdge& edge : snapshot.edges) {
+    if (!addEdge(edge)) {
+      throw std::invalid_argument("Backend::restore: an edge names a missing keyframe (" +
+                                  std::to_string(edge.from_id) + " -> " +
+                                  std::to_string(edge.to_id) + ")");
+    }
+  }
+  for (const CulledKeyframeRecord& record : snapshot.culled) {
+    if (!graph_.hasNode(record.anchor_id) || graph_.hasNode(record.id)) {
+      throw std::invalid_argument("Backend::restore: culled keyframe " + std::to_string(record.id) +
+                                  " is anchored to " + std::to_string(record.anchor_id) +
+                                  ", which is not a keyframe of the graph");
+    }
+    culled_[record.id] =
+        CulledKeyframe{record.anchor_id, record.T_anchor_keyframe, record.information};
+    keyframes_.emplace(record.id, records.count(record.id) != 0 ? records.at(record.id)
+                                                                 : KeyframeInfo{});
+  }
+  for (const auto& [segment, parent] : snapshot.segment_parents) segment_parent_[segment] = parent;
+  first_segment_ = snapshot.first_segment;
+  segment_parent_.emplace(first_segment_, first_segment_);
+  next_keyframe_id_ = snapshot.next_keyframe_id;
+  next_segment_ = snapshot.next_segment;
+  for (const auto& [id, info] : keyframes_) {
+    next_keyframe_id_ = std::max(next_keyframe_id_, id + 1);
+    next_segment_ = std::max(next_segment_, info.segment + 1);
+  }
+  num_loops_ = static_cast<int>(snapshot.num_loops);
+  num_local_edges_ = static_cast<int>(snapshot.num_local_edges);
+  num_relocalizations_ = static_cast<int>(snapshot.num_relocalizations);
+  previous_ = snapshot.keyframes.back();
+  num_restored_ = static_cast<std::int64_t>(snapshot.keyframes.size());
+  restored_link_pending_ = true;
 }
 
 }  // namespace slamd

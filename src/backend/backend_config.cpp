@@ -11,7 +11,17 @@ const EnumNames<RobustKernel> kRobustKernelNames = {
      "rejects wrong loops almost completely (warm-started with Huber)"},
 };
 
+const EnumNames<BackendMode> kBackendModeNames = {
+    {BackendMode::kSlam, "slam",
+     "new keyframes join a loaded session's map and extend it; loops to it close"},
+    {BackendMode::kLocalize, "localize",
+     "a loaded session's map is a fixed reference: poses are localised in it, the map is not "
+     "changed"},
+};
+
 }  // namespace
+
+const char* backendModeName(BackendMode mode) { return enumText(kBackendModeNames, mode); }
 
 const char* robustKernelName(RobustKernel kernel) { return enumText(kRobustKernelNames, kernel); }
 
@@ -20,6 +30,8 @@ const ConfigSchema<BackendConfig>& BackendConfig::schema() {
   static const auto table =
       ConfigSchema<C>("backend")
           .flag("enabled", &C::enabled, "run the back end (loop closing, pose graph)")
+          .choice("mode", &C::mode, kBackendModeNames,
+                  "with a session loaded (--session-in): extend its map, or only localise in it")
           .choice("robust_kernel", &C::robust_kernel, kRobustKernelNames,
                   "kernel on robust edges (loop edges; odometry edges too with "
                   "robust_odometry_edges)")

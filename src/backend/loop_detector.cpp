@@ -336,13 +336,39 @@ LoopDetection LoopDetector::processKeyframe(const Keyframe& keyframe,
     detection.num_inliers = best.num_inliers;
   }
 
+  store(keyframe, bow, path_length_m);
+  return done();
+}
+
+void LoopDetector::store(const Keyframe& keyframe, BowVector bow, double path_length_m) {
   // A removed entry kept its BoW only while it was the latest (the score threshold above).
   if (!entries_.empty() && entries_.back().removed) entries_.back().bow = BowVector();
   const int entry = static_cast<int>(entries_.size());
-  entries_.push_back({keyframe.id, keyframe.segment, keyframe.T_world_camera, path_length_m, bow,
-                      keyframe.features});
   for (const auto& [word, weight] : bow) inverted_[word].emplace_back(entry, weight);
-  return done();
+  entries_.push_back({keyframe.id, keyframe.segment, keyframe.T_world_camera, path_length_m,
+                      std::move(bow), keyframe.features});
+}
+
+void LoopDetector::insertKeyframe(const Keyframe& keyframe) {
+  groups_.clear();
+  if (!hasBinaryDescriptors(keyframe.features) || vocabulary_ == nullptr || vocabulary_->empty()) {
+    return;
+  }
+  double path_length_m = 0.0;
+  if (!entries_.empty()) {
+    path_length_m = entries_.back().path_length_m + (keyframe.T_world_camera.translation() -
+                                                     entries_.back().T_world_camera.translation())
+                                                        .norm();
+  }
+  store(keyframe, vocabulary_->transform(keyframe.features.descriptors), path_length_m);
+}
+
+std::unordered_map<std::int64_t, const FeatureSet*> LoopDetector::storedFeatures() const {
+  std::unordered_map<std::int64_t, const FeatureSet*> features;
+  for (const Entry& entry : entries_) {
+    if (!entry.removed) features[entry.id] = &entry.features;
+  }
+  return features;
 }
 
 bool LoopDetector::removeKeyframe(std::int64_t id) {

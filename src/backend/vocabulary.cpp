@@ -277,15 +277,6 @@ class Reader {
   std::size_t position_ = 0;
 };
 
-std::uint64_t fnv1a(const std::string& bytes) {
-  std::uint64_t hash = 14695981039346656037ull;
-  for (char c : bytes) {
-    hash ^= static_cast<std::uint8_t>(c);
-    hash *= 1099511628211ull;
-  }
-  return hash;
-}
-
 bool fail(std::string* error, const std::string& message) {
   if (error != nullptr) *error = message;
   return false;
@@ -310,7 +301,10 @@ void Vocabulary::write(std::ostream& out) const {
   put(header, static_cast<std::int64_t>(num_words_));
   put(header, static_cast<std::uint64_t>(payload.size()));
   // The checksum covers the header fields after the magic and the payload.
-  put(payload, fnv1a(header.substr(sizeof(kMagic)) + payload));
+  const std::uint64_t checksum =
+      fnv1a64(payload.data(), payload.size(),
+              fnv1a64(header.data() + sizeof(kMagic), header.size() - sizeof(kMagic)));
+  put(payload, checksum);
   out.write(header.data(), static_cast<std::streamsize>(header.size()));
   out.write(payload.data(), static_cast<std::streamsize>(payload.size()));
 }
@@ -367,7 +361,9 @@ bool Vocabulary::read(std::istream& in, std::string* error) {
     return fail(error, "truncated (expected " + std::to_string(payload_size + 8) +
                            " bytes after the header)");
   }
-  if (fnv1a(header + payload) != checksum) return fail(error, "checksum mismatch (corrupt file)");
+  if (fnv1a64(payload.data(), payload.size(), fnv1a64(header.data(), header.size())) != checksum) {
+    return fail(error, "checksum mismatch (corrupt file)");
+  }
 
   Reader r(payload);
   std::vector<Node> nodes(static_cast<std::size_t>(num_nodes));

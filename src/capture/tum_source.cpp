@@ -1,5 +1,6 @@
 #include "slamd/capture/tum_source.hpp"
 
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -30,7 +31,12 @@ const ConfigSchema<TumSourceConfig>& TumSourceConfig::schema() {
           .text("associations", &C::associations,
                 "association file (relative to the folder); empty = associate by time")
           .text("groundtruth", &C::groundtruth,
-                "ground-truth file (relative to the folder); empty = none");
+                "ground-truth file (relative to the folder); empty = none")
+          .number("first_frame", &C::first_frame, 0, 100000000, "frames",
+                  "play from this associated frame on (0 = the first): part of a sequence, "
+                  "e.g. to map one half and localise in it with the other")
+          .number("frame_count", &C::frame_count, 0, 100000000, "frames",
+                  "play at most this many frames; 0 = to the end");
   return table;
 }
 
@@ -92,6 +98,17 @@ void TumSource::open() {
   if (pairs_.empty()) {
     throw SourceError("TUM folder " + folder_ + ": no colour image has a depth image within " +
                       std::to_string(config_.max_difference_s) + " s");
+  }
+  const std::size_t first = std::min(pairs_.size(), static_cast<std::size_t>(config_.first_frame));
+  std::size_t last = pairs_.size();
+  if (config_.frame_count > 0) {
+    last = std::min(last, first + static_cast<std::size_t>(config_.frame_count));
+  }
+  pairs_.erase(pairs_.begin() + static_cast<std::ptrdiff_t>(last), pairs_.end());
+  pairs_.erase(pairs_.begin(), pairs_.begin() + static_cast<std::ptrdiff_t>(first));
+  if (pairs_.empty()) {
+    throw SourceError("TUM folder " + folder_ + ": capture.tum.first_frame " +
+                      std::to_string(config_.first_frame) + " is past its last frame");
   }
   // Rejected list lines are reported as skipped frames first, so they are counted like any other
   // bad frame; then the pairs in time order.

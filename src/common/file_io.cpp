@@ -192,6 +192,15 @@ std::vector<std::string> removeStaleTemporaryFiles(const std::vector<std::string
   return removed;
 }
 
+std::uint64_t fnv1a64(const void* data, std::size_t size, std::uint64_t hash) {
+  const auto* bytes = static_cast<const std::uint8_t*>(data);
+  for (std::size_t i = 0; i < size; ++i) {
+    hash ^= bytes[i];
+    hash *= 1099511628211ull;  // the 64-bit FNV prime
+  }
+  return hash;
+}
+
 bool readFileBytes(const std::string& path, std::vector<std::uint8_t>& bytes, std::string& error) {
   // Only regular files: a FIFO would block the reader forever and a directory "opens" with an
   // absurd size. The check follows symbolic links, as opening does.

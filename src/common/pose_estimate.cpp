@@ -14,6 +14,8 @@ const char* trackingStateName(TrackingState state) {
       return "lost";
     case TrackingState::kRelocalized:
       return "relocalized";
+    case TrackingState::kNotLocalized:
+      return "not_localized";
   }
   return "?";
 }

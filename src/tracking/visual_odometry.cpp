@@ -199,6 +199,11 @@ void VisualOdometry::reset() {
   ++segment_;
 }
 
+void VisualOdometry::continueNumbering(std::int64_t next_keyframe_id, std::int64_t next_segment) {
+  next_keyframe_id_ = std::max(next_keyframe_id_, next_keyframe_id);
+  segment_ = std::max(segment_, next_segment);
+}
+
 OdometryResult VisualOdometry::processFrame(const RgbdFramePtr& frame) {
   if (!frame) return processFrame(RgbdFrame());
   return guardedProcess(*frame, frame);

@@ -68,6 +68,11 @@ TEST_F(DaemonScenario, SigintMidRunSavesAMapAndTrajectoryThatLoadBack) {
   EXPECT_EQ(run("sigint", &log), 0) << log;
 }
 
+TEST_F(DaemonScenario, KillDuringSaveSessionLeavesASessionThatLoads) {
+  std::string log;
+  EXPECT_EQ(run("session_kill", &log), 0) << log;
+}
+
 TEST_F(DaemonScenario, MalformedMessagesAreCountedAndSaveMapWorksWhileRunning) {
   std::string log;
   EXPECT_EQ(run("commands_and_malformed", &log), 0) << log;

@@ -45,6 +45,9 @@ struct BackendCorrection {
   /// The message for SLAMD_KEYFRAMES.
   KeyframeTrajectory trajectory;
   bool relocalized = false;  ///< a lost tracking segment was put back into the map
+  /// The newest keyframe is in the map's frame: false while the run's first segment has not
+  /// been relocalised into a loaded session's map.
+  bool map_frame_known = true;
 };
 
 struct BackendStageStats {
@@ -59,6 +62,10 @@ struct BackendStageStats {
   /// Longest optimisation in the back-end thread (a local window, or a whole graph when not in
   /// the background).
   double max_optimization_ms = 0.0;
+  /// With a restored session: frames this run tracked before the keyframe that put it in the
+  /// loaded map's frame (0 = the first frame's keyframe did); -1 while not localised or without
+  /// a session.
+  std::int64_t frames_before_localization = -1;
   std::int64_t background_optimizations = 0;    ///< whole-graph ones merged from the background
   double max_background_optimization_ms = 0.0;  ///< their longest (on the worker thread)
 };
@@ -84,7 +91,11 @@ class BackendStage {
   /// the frame's pose relative to that keyframe; T_world_camera in the corrected world.
   Trajectory optimizedTrajectory() const;
 
-  /// Forgets everything (the RESET command).
+  /// Loads a session's back end (Backend::restore) into the fresh stage: the loaded keyframes
+  /// join the published keyframe list; RESET restores it again. Throws as Backend::restore.
+  void restore(std::shared_ptr<const BackendSnapshot> snapshot);
+
+  /// Forgets everything (the RESET command); a restored session is restored again.
   void reset();
 
   const BackendStageStats& stats() const { return stats_; }
@@ -107,6 +118,8 @@ class BackendStage {
   KeyframeAnchoredTrajectory frames_;
   std::vector<KeyframePoseEntry> keyframes_;  ///< id order; poses filled in on demand
   std::int64_t latest_keyframe_id_ = -1;
+  std::int64_t frames_seen_ = 0;  ///< tracked frames of this run (restored sessions)
+  std::shared_ptr<const BackendSnapshot> restored_;  ///< the session loaded, if any
   MemoryPressure memory_pressure_ = MemoryPressure::kNone;
   Utime latest_keyframe_utime_ = 0;
   std::int64_t sequence_ = 0;

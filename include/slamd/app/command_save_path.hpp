@@ -22,4 +22,10 @@ namespace slamd {
 std::optional<std::string> resolveCommandSavePath(const std::string& argument,
                                                   const std::string& save_dir, std::string& error);
 
+/// The session folder a SAVE_SESSION command names: a bare name of the same characters (no
+/// extension needed), made inside save_dir; nullopt with `error` saying why when refused.
+std::optional<std::string> resolveCommandSessionPath(const std::string& argument,
+                                                     const std::string& save_dir,
+                                                     std::string& error);
+
 }  // namespace slamd

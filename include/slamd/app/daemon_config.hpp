@@ -18,6 +18,8 @@ struct DaemonConfig {
   std::string map_out;
   std::string groundtruth_out;
   std::string metrics_out;
+  std::string session_in;
+  std::string session_out;
   double status_period_s = 1.0;
   double drain_deadline_s = 5.0;
   double heartbeat_period_s = 0.2;

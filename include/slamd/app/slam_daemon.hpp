@@ -40,6 +40,8 @@ struct DaemonOverrides {
   std::string map_out;          ///< --map-out
   std::string groundtruth_out;  ///< --groundtruth-out
   std::string metrics_out;      ///< --metrics-out
+  std::string session_in;       ///< --session-in
+  std::string session_out;      ///< --session-out
   /// Wraps the source the configuration names (tests: fault injection such as a camera that
   /// drops out); empty = none.
   std::function<std::unique_ptr<FrameSource>(std::unique_ptr<FrameSource>)> wrap_source;
@@ -57,6 +59,12 @@ struct DaemonSummary {
   std::uint64_t poses_predicted = 0;
   std::uint64_t poses_lost = 0;
   std::uint64_t poses_not_initialized = 0;
+  /// Poses published TRACKING_NOT_LOCALIZED: a session was loaded and the run had not yet been
+  /// relocalised in its map (counted in the states above too).
+  std::uint64_t poses_not_localized = 0;
+  /// With --session-in: frames tracked before the one whose keyframe localised the run in the
+  /// loaded map (BackendStageStats::frames_before_localization); -1 when never localised.
+  std::int64_t frames_before_localization = -1;
   /// Motion estimates vetoed as beyond the camera's motion limits (then retried or predicted).
   std::uint64_t implausible_estimates = 0;
   std::uint64_t prior_disagreements = 0;  ///< estimates rejected by the motion prior's gate

@@ -28,6 +28,8 @@
 #include <cstdint>
 #include <deque>
 #include <functional>
+#include <future>
+#include <memory>
 #include <optional>
 #include <sstream>
 #include <string>
@@ -178,6 +180,10 @@ class TrackingStep : public StepBase {
 
   std::optional<TrackedPacket> process(CapturePacket packet);
   void reset() override { odometry_.reset(); }
+  /// VisualOdometry::continueNumbering (before the pipeline starts).
+  void continueNumbering(std::int64_t next_keyframe_id, std::int64_t next_segment) {
+    odometry_.continueNumbering(next_keyframe_id, next_segment);
+  }
   /// The latest frame's tracking state (any thread).
   TrackingState stats() const {
     return static_cast<TrackingState>(tracking_state_.load(std::memory_order_relaxed));
@@ -264,6 +270,9 @@ class FilterStep : public StepBase {
 struct PoseCorrection {
   SE3 T_world_uncorrected = SE3::Identity();
   bool relocalized = false;  ///< mark the next published pose TRACKING_RELOCALIZED
+  /// The newest keyframe is in the map's frame (false while a loaded session's map has not been
+  /// relocalised into).
+  bool map_frame_known = true;
   std::uint64_t reset_epoch = 0;
 };
 
@@ -274,6 +283,9 @@ struct TrackingTally {
   std::atomic<std::uint64_t> predicted{0};
   std::atomic<std::uint64_t> lost{0};
   std::atomic<std::uint64_t> not_initialized{0};
+  /// Of the poses with an estimate, those published TRACKING_NOT_LOCALIZED (a loaded session's
+  /// map not yet relocalised into); counted in the states above too.
+  std::atomic<std::uint64_t> not_localized{0};
   /// Frame time of the first pose of the current loss (predicted or lost), -1 while tracking.
   std::atomic<Utime> loss_start_utime{-1};
   std::atomic<Utime> latest_utime{0};
@@ -304,6 +316,10 @@ class PublishStep : public StepBase {
 
   void process(EstimatedPacket packet);
   void reset() override;
+  /// A session was loaded: poses are TRACKING_NOT_LOCALIZED until a correction puts the newest
+  /// keyframe in the map's frame (PoseCorrection::map_frame_known), and again after a reset.
+  /// Before the pipeline starts.
+  void awaitMapFrame();
   const TrackingTally& stats() const { return tally_; }
   /// Capture-to-publication latency (any thread).
   const LatencyHistogram& endToEnd() const { return end_to_end_; }
@@ -318,6 +334,8 @@ class PublishStep : public StepBase {
   SE3 correction_ = SE3::Identity();
   bool corrected_ = false;
   bool relocalized_ = false;
+  bool localizes_in_loaded_map_ = false;
+  bool awaiting_map_frame_ = false;
   TrackingTally tally_;
   LatencyHistogram end_to_end_;
   Trajectory trajectory_;
@@ -325,12 +343,29 @@ class PublishStep : public StepBase {
 
 // --- mapping ---------------------------------------------------------------------------------
 
+/// A map written for a session, with what the session's manifest says of it.
+struct SavedMap {
+  MapFileResult file;
+  std::int64_t voxels = 0;                           ///< leaves of the tree
+  Eigen::Vector3d min_m = Eigen::Vector3d::Zero();  ///< extent, map frame (zero when empty)
+  Eigen::Vector3d max_m = Eigen::Vector3d::Zero();
+};
+
+/// Mapper::saveMap(path) and the map's size and extent (by the thread that owns the mapper).
+SavedMap saveMapForSession(Mapper& mapper, const std::string& path);
+
 /// A request from the control loop to the mapping step, which owns the map while running.
 struct MapRequest {
   enum class Kind { kSave, kPublish };
   Kind kind = Kind::kSave;
   std::string path;  ///< kSave: .bt or .ot
+  /// kSave for a session (SAVE_SESSION): the result goes here (the control loop waits on it).
+  std::shared_ptr<std::promise<SavedMap>> saved;
 };
+
+/// A request from the control loop to the back-end step: the back end's snapshot (a session
+/// being saved while running).
+using SnapshotRequest = std::shared_ptr<std::promise<std::shared_ptr<const BackendSnapshot>>>;
 
 /// A back-end correction as the mapping step receives it.
 struct MapCorrection {
@@ -354,6 +389,10 @@ class MappingStep : public StepBase {
   /// Throws when a frame could not be mapped (the pipeline counts it against this stage).
   void process(const EstimatedPacket& packet);
   void reset() override;
+  /// The mapper holds a loaded session's map (before the pipeline starts). Frames are not
+  /// integrated until a correction puts them in the map's frame (BackendCorrection::
+  /// map_frame_known); with `frozen` (backend.mode=localize) never: the map stays as loaded.
+  void useLoadedMap(bool frozen);
   /// Serves the waiting map requests (also called by the control thread after the stop).
   void serveRequests();
   MappingStepStats stats() const;
@@ -382,6 +421,8 @@ class MappingStep : public StepBase {
   /// The back end's correction: uncorrected (filter) world -> corrected world.
   SE3 T_world_uncorrected_ = SE3::Identity();
   bool snapshot_failing_ = false;  ///< the last periodic snapshot failed
+  bool map_frozen_ = false;          ///< a loaded map that frames never change
+  bool awaiting_map_frame_ = false;  ///< frames are not yet in the loaded map's frame
   std::atomic<std::int64_t> leaf_voxels_{0};
   std::atomic<std::int64_t> occupied_voxels_{0};
   const std::atomic<MemoryPressure>* memory_pressure_ = nullptr;
@@ -406,6 +447,8 @@ class BackendStep : public StepBase {
 
   void process(const EstimatedPacket& packet);
   void reset() override { backend_.reset(); }
+  /// Snapshot requests from the control loop, served on every packet (heartbeats too).
+  void serveSnapshots(SpscQueue<SnapshotRequest>* requests) { snapshot_requests_ = requests; }
   /// Counts for the status message (any thread).
   BackendStepStats stats() const;
   /// The level the back end degrades by (read on every packet; set by the control thread).
@@ -419,6 +462,7 @@ class BackendStep : public StepBase {
   DaemonPublisher& publisher_;
   SpscQueue<PoseCorrection>* pose_corrections_;
   SpscQueue<MapCorrection>* map_corrections_;
+  SpscQueue<SnapshotRequest>* snapshot_requests_ = nullptr;
   std::atomic<std::int32_t> keyframes_{0};
   std::atomic<std::int32_t> loops_{0};
   std::atomic<std::int32_t> relocalizations_{0};

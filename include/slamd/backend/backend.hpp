@@ -53,6 +53,16 @@
 // edges added since. Wanted again while one is out (another far loop), the next copy is taken
 // after the merge. Per keyframe the cost is then the local window's, whatever the graph's size.
 //
+// Sessions (backend/session.hpp): snapshot() is what a later run needs to continue, restore()
+// loads it into an empty Backend. The loaded keyframes are fixed: they are the map's frame of
+// reference, and the map built from them (the OctoMap saved with them) cannot follow if they
+// move. The first keyframe added after restore() starts a segment of its own at its own
+// odometry pose, tied to the loaded map by the weak link only, and relocalises against it like a
+// segment after LOST; until then T_world_odometry is the identity and relocalization_pending is
+// true (the map's frame is not yet known). The caller numbers the new keyframes and segments
+// from nextKeyframeId() and nextSegment(). backend.mode (BackendMode) is the daemon's: both
+// modes restore the same way.
+//
 // Relocalisation (backend.relocalization): a keyframe starting a new segment (after LOST) is tied
 // to the previous one by a very weak edge only, and matched against every keyframe of earlier
 // segments (LoopDetector::query, no recency exclusion or consistency). On a verified match a
@@ -72,6 +82,7 @@
 #include "slamd/backend/background_optimizer.hpp"
 #include "slamd/backend/loop_detector.hpp"
 #include "slamd/backend/pose_graph.hpp"
+#include "slamd/backend/session.hpp"
 #include "slamd/common/memory_pressure.hpp"
 #include "slamd/tracking/visual_odometry.hpp"
 
@@ -139,6 +150,20 @@ class Backend {
   /// covered; kOver one covering keyframe and at most 70%.
   void setMemoryPressure(MemoryPressure pressure) { memory_pressure_ = pressure; }
 
+  /// Everything needed to continue later (see the class comment): the graph, the keyframes in it
+  /// (features and descriptors; keyframes without binary descriptors are kept without
+  /// features), culled keyframes, segments and counters.
+  BackendSnapshot snapshot() const;
+  /// Loads a snapshot into this Backend, which must be empty (nothing added, nothing restored):
+  /// throws std::logic_error otherwise, and std::invalid_argument when the snapshot is not
+  /// consistent (an edge or culled keyframe naming a missing keyframe).
+  void restore(const BackendSnapshot& snapshot);
+  /// Keyframes loaded by restore().
+  std::int64_t numRestoredKeyframes() const { return num_restored_; }
+  /// One above every keyframe id and segment added or restored.
+  std::int64_t nextKeyframeId() const { return next_keyframe_id_; }
+  std::int64_t nextSegment() const { return next_segment_; }
+
   /// Current (corrected) T_world_camera of a keyframe; the odometry pose before any loop. A
   /// culled keyframe's is the pose of the keyframe it was merged into, composed with the offset
   /// measured between them. Throws std::out_of_range for an id never added.
@@ -155,6 +180,11 @@ class Backend {
   int numLoops() const { return num_loops_; }
   int numLocalEdges() const { return num_local_edges_; }
   int numRelocalizations() const { return num_relocalizations_; }
+  /// The newest keyframe's segment is joined to the map of the first segment (a restored
+  /// session's map, or this run's first segment's).
+  bool newestKeyframeInMap() const {
+    return previous_ != nullptr && segmentRoot(previous_->segment) == segmentRoot(first_segment_);
+  }
   /// The segment whose map `segment` has been joined to (the segment itself until then).
   std::int64_t segmentRoot(std::int64_t segment) const;
 
@@ -169,6 +199,15 @@ class Backend {
   struct KeyframeInfo {
     std::int64_t segment = 0;
     double path_length_m = 0.0;  ///< odometry path from the first keyframe of its segment
+  };
+  /// What a snapshot needs of a keyframe in the graph beyond the features the loop detector
+  /// keeps (held here so that the features are not held twice).
+  struct KeyframeHeader {
+    Utime utime = 0;
+    std::int64_t frame_sequence = 0;
+    SE3 T_world_camera = SE3::Identity();  ///< odometry pose
+    CameraIntrinsics intrinsics;
+    double median_depth_m = 0.0;
   };
 
   BackendUpdate add(const KeyframePtr& keyframe, const Matrix6d* covariance_prev_curr);
@@ -204,6 +243,12 @@ class Backend {
   std::unordered_map<std::int64_t, std::vector<std::int64_t>> neighbours_;  ///< graph adjacency
   std::unordered_map<std::int64_t, std::int64_t> segment_parent_;  ///< joined segments (union-find)
   std::unordered_map<std::int64_t, CulledKeyframe> culled_;
+  std::unordered_map<std::int64_t, KeyframeHeader> headers_;  ///< keyframes in the graph
+  std::int64_t next_keyframe_id_ = 0;
+  std::int64_t next_segment_ = 0;
+  std::int64_t num_restored_ = 0;
+  /// restore() happened and no keyframe has been added since.
+  bool restored_link_pending_ = false;
   std::int64_t first_segment_ = 0;
   int relocalization_attempts_ = 0;  ///< attempts of the latest segment
   int num_loops_ = 0;

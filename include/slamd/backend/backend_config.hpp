@@ -17,10 +17,19 @@ enum class RobustKernel { kNone, kHuber, kCauchy };
 
 const char* robustKernelName(RobustKernel kernel);
 
+/// What the back end does with a loaded session (--session-in; key backend.mode).
+enum class BackendMode {
+  kSlam,      ///< new keyframes join the loaded map, which the new run extends
+  kLocalize,  ///< the loaded map is a fixed reference: the run only localises in it
+};
+
+const char* backendModeName(BackendMode mode);
+
 // Each key's type, default, range, unit and doc: backend_config.cpp (its one declaration), or
 // `slamd --describe-config backend`.
 struct BackendConfig {
   bool enabled = false;
+  BackendMode mode = BackendMode::kSlam;
 
   // --- Pose-graph optimisation ----------------------------------------------------------------
   RobustKernel robust_kernel = RobustKernel::kCauchy;

@@ -103,10 +103,18 @@ class LoopDetector {
   std::vector<LoopDetection> matchLocal(const Keyframe& keyframe, const KeyframeFilter& allowed,
                                         const PosePrior& prior = PosePrior());
 
+  /// Stores a keyframe without searching (a keyframe of a loaded session): later searches can
+  /// return it. A keyframe without binary descriptors, or an empty vocabulary, stores nothing.
+  void insertKeyframe(const Keyframe& keyframe);
+
   /// Forgets a stored keyframe (culled by the back end): no search returns it any more and its
   /// features are released. Its place in the order of keyframes stays (the recent-keyframe
   /// exclusion and path lengths count it). Returns false for an unknown or removed id.
   bool removeKeyframe(std::int64_t id);
+
+  /// The features of every searchable stored keyframe, by id (pointers into the detector, valid
+  /// until it changes).
+  std::unordered_map<std::int64_t, const FeatureSet*> storedFeatures() const;
 
   /// Stored entries, removed ones included.
   std::size_t size() const { return entries_.size(); }
@@ -132,6 +140,8 @@ class LoopDetector {
     int count = 0;
   };
 
+  /// Adds an entry and its postings.
+  void store(const Keyframe& keyframe, BowVector bow, double path_length_m);
   std::vector<Candidate> retrieve(const BowVector& bow, std::size_t num_searchable,
                                   double min_score,
                                   const KeyframeFilter& allowed = KeyframeFilter()) const;

@@ -37,6 +37,8 @@ struct TumSourceConfig {
   double time_offset_s = 0.0;
   std::string associations;
   std::string groundtruth = "groundtruth.txt";
+  int first_frame = 0;  ///< frames (associated pairs) before this one are not played
+  int frame_count = 0;  ///< at most this many frames are played; 0 = to the end
 
   static const ConfigSchema<TumSourceConfig>& schema();
   static TumSourceConfig load(Config& config);

@@ -9,6 +9,7 @@
 //
 // Every write, flush, fsync, close and rename is checked; errors carry strerror's text.
 
+#include <cstddef>
 #include <cstdint>
 #include <functional>
 #include <ostream>
@@ -41,6 +42,14 @@ bool writeOutputFile(const std::string& path, const std::function<bool(std::ostr
 std::vector<std::string> removeStaleTemporaryFiles(const std::vector<std::string>& output_paths,
                                                    const std::string& folder = "",
                                                    const std::vector<std::string>& suffixes = {});
+
+/// The FNV-1a offset basis: the 64-bit FNV-1a hash of no bytes, where a hash starts.
+inline constexpr std::uint64_t kFnv1a64Basis = 14695981039346656037ull;
+
+/// 64-bit FNV-1a hash of `size` bytes at `data`, continuing from `hash`: a file checksummed in
+/// pieces gives the same value as in one call (fnv1a64(b, nb, fnv1a64(a, na)) hashes a then b).
+/// A checksum against accidental damage (vocabulary and session files), not against tampering.
+std::uint64_t fnv1a64(const void* data, std::size_t size, std::uint64_t hash = kFnv1a64Basis);
 
 /// Reads a whole regular file (a FIFO, directory or device is refused: reading one could block
 /// forever or never end). Returns false and sets `error` when it cannot be read or is empty.

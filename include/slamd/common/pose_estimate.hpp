@@ -17,6 +17,9 @@ enum class TrackingState : std::int8_t {
   kPredicted = 2,  ///< no measurement for this frame: constant-velocity prediction
   kLost = 3,
   kRelocalized = 4,
+  /// Tracking works, but a session was loaded (--session-in) and the pose is not yet localised
+  /// in its map: it is in this run's own frame, which starts at the first camera pose.
+  kNotLocalized = 5,
 };
 
 /// Which estimator produced a pose; values match pose_t.SOURCE_*.

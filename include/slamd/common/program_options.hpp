@@ -27,6 +27,7 @@ enum ExitCode : int {
   kExitConfigError = 3,  ///< configuration file or value invalid
   kExitSourceError = 4,  ///< input source could not be opened or failed
   kExitOutputError = 5,  ///< an output file could not be written
+  kExitSessionError = 6,  ///< a session (--session-in) was refused
 };
 
 class ProgramOptions {

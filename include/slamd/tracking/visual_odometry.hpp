@@ -125,6 +125,11 @@ class VisualOdometry {
   /// Forgets everything; the next frame starts a new segment at the identity.
   void reset();
 
+  /// Numbers the keyframes and segments made from now on from these values (at least): a run
+  /// that continues a loaded session (Backend::nextKeyframeId(), nextSegment()) must not reuse
+  /// the session's ids.
+  void continueNumbering(std::int64_t next_keyframe_id, std::int64_t next_segment);
+
   const TrackingConfig& config() const { return config_; }
   KeyframePtr currentKeyframe() const { return keyframe_; }
   TrackingState state() const { return state_; }
