@@ -108,7 +108,7 @@ auto body(Step& step) {
 
 struct SlamDaemon::Impl {
   // --- configuration (read once, on the constructing thread) -------------------------------
-  Config& config;
+  Config& config;  ///< the caller's: used during construction only
   DaemonConfig daemon;
   ChannelConfig channels;
   TrackingConfig tracking_config;
@@ -125,6 +125,8 @@ struct SlamDaemon::Impl {
   std::unique_ptr<BackendStage> backend;
   /// Built by run() once the LCM bus is up.
   std::unique_ptr<DaemonSteps> steps;
+  /// The configuration as read, for sessions (config.effectiveYaml() at construction).
+  std::string effective_config_yaml;
   /// The back end's vocabulary (null without a back end).
   std::shared_ptr<const Vocabulary> vocabulary;
   /// The session loaded (--session-in); its back end and map moved into the stages at start.
@@ -183,8 +185,9 @@ struct SlamDaemon::Impl {
     if (daemon.publish_frames) frame_publisher_config = LcmFramePublisherConfig::load(config);
     if (mapping_config.enabled) mapper = std::make_unique<Mapper>(mapping_config);
     if (!backend_config.enabled && !(daemon.session_in.empty() && daemon.session_out.empty())) {
-      throw ConfigError("sessions (--session-in, --session-out) need the back end: set "
-                        "backend.enabled=true");
+      throw ConfigError(
+          "sessions (--session-in, --session-out) need the back end: set "
+          "backend.enabled=true");
     }
     if (backend_config.enabled) {
       if (!daemon.session_in.empty()) {
@@ -204,6 +207,9 @@ struct SlamDaemon::Impl {
     // configuration error surfaces before anything starts.
     source = createFrameSource(daemon.source, config);
     if (session) restoreSession();
+    // Every section has been read: this is the configuration a saved session records (`config`
+    // is the caller's and need not outlive the constructor).
+    effective_config_yaml = config.effectiveYaml();
     if (overrides.wrap_source) source = overrides.wrap_source(std::move(source));
     removeStaleTemporaryFilesOfOutputs();
   }
@@ -652,11 +658,11 @@ int SlamDaemon::Impl::run(ShutdownSignals& signals) {
     command_session_dir = session_save->dir;
     session_save.reset();
   }
-  const bool command_session_saved =
-      command_session_dir.empty() || command_session_dir == daemon.session_out ||
-      saveSession(command_session_dir);
-  const bool session_saved = (daemon.session_out.empty() || saveSession(daemon.session_out)) &&
-                             command_session_saved;
+  const bool command_session_saved = command_session_dir.empty() ||
+                                     command_session_dir == daemon.session_out ||
+                                     saveSession(command_session_dir);
+  const bool session_saved =
+      (daemon.session_out.empty() || saveSession(daemon.session_out)) && command_session_saved;
   const bool metrics_written = daemon.metrics_out.empty() || writeMetrics(stats);
   const int outputs = writeOutputs();
   steps.reset();  // before the bus its frame publisher uses
@@ -1027,14 +1033,12 @@ void SlamDaemon::Impl::restoreSession() {
 bool SlamDaemon::Impl::saveSession(const std::string& dir) {
   const auto start = std::chrono::steady_clock::now();
   const BackendSnapshot snapshot = backend->backend().snapshot();
-  const bool saved = writeSession(dir, snapshot, [this](const std::string& path) {
-    return saveMapForSession(*mapper, path);
-  });
+  const bool saved = writeSession(
+      dir, snapshot, [this](const std::string& path) { return saveMapForSession(*mapper, path); });
   if (saved) {
-    SLAMD_LOG_INFO(kLog) << "session written to " << dir << " in "
-                         << std::chrono::duration<double>(std::chrono::steady_clock::now() - start)
-                                .count()
-                         << " s";
+    SLAMD_LOG_INFO(kLog)
+        << "session written to " << dir << " in "
+        << std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count() << " s";
   }
   return saved;
 }
@@ -1062,7 +1066,7 @@ bool SlamDaemon::Impl::writeSession(const std::string& dir, const BackendSnapsho
       info.map_min_m = map.min_m;
       info.map_max_m = map.max_m;
     }
-    writer.writeText(kSessionConfigFile, config.effectiveYaml());
+    writer.writeText(kSessionConfigFile, effective_config_yaml);
     writer.commit(info);
     SLAMD_LOG_INFO(kLog) << "session: " << info.keyframes << " keyframes, " << info.landmarks
                          << " landmarks, " << info.map_voxels << " map voxels in "
@@ -1141,24 +1145,21 @@ void SlamDaemon::Impl::progressSessionSave() {
   const std::shared_ptr<const BackendSnapshot> snapshot = save.snapshot.get();
   std::optional<SavedMap> map;
   if (save.map.valid()) map = save.map.get();
-  const bool saved =
-      writeSession(save.dir, *snapshot, [&map, &save](const std::string& path) {
-        SavedMap moved = *map;
-        if (moved.file.ok) {
-          std::error_code error;
-          std::filesystem::rename(save.map_path, path, error);
-          if (error) {
-            moved.file.ok = false;
-            moved.file.error = "cannot move " + save.map_path + " to " + path + ": " +
-                               error.message();
-          }
-        }
-        return moved;
-      });
+  const bool saved = writeSession(save.dir, *snapshot, [&map, &save](const std::string& path) {
+    SavedMap moved = *map;
+    if (moved.file.ok) {
+      std::error_code error;
+      std::filesystem::rename(save.map_path, path, error);
+      if (error) {
+        moved.file.ok = false;
+        moved.file.error = "cannot move " + save.map_path + " to " + path + ": " + error.message();
+      }
+    }
+    return moved;
+  });
   if (saved) {
     SLAMD_LOG_INFO(kLog) << "SAVE_SESSION: session written to " << save.dir << " in "
-                         << static_cast<double>(steadyNowNs() - save.started_ns) * 1e-9
-                         << " s";
+                         << static_cast<double>(steadyNowNs() - save.started_ns) * 1e-9 << " s";
   }
 }
 

@@ -468,10 +468,9 @@ void BackendStep::process(const EstimatedPacket& packet) {
   if (!correction) return;
   correction->trajectory.frame_id = world_frame_;
   publisher_.publishKeyframes(correction->trajectory);
-  if (pose_corrections_ &&
-      !pose_corrections_->tryPush(
-          PoseCorrection{correction->T_world_uncorrected, correction->relocalized,
-                         correction->map_frame_known, resetEpoch()})) {
+  if (pose_corrections_ && !pose_corrections_->tryPush(PoseCorrection{
+                               correction->T_world_uncorrected, correction->relocalized,
+                               correction->map_frame_known, resetEpoch()})) {
     // Cannot happen while the publish step keeps up (it drains on every frame); if it does,
     // the next correction replaces this one anyway.
     SLAMD_LOG_WARN(kLog) << "pose correction not handed to the publish step: queue full";

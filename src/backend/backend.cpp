@@ -366,9 +366,9 @@ BackendUpdate Backend::add(const KeyframePtr& keyframe, const Matrix6d* covarian
     addEdge(edge);
   }
   keyframes_[keyframe->id] = info;
-  headers_[keyframe->id] = KeyframeHeader{keyframe->utime, keyframe->frame_sequence,
-                                          keyframe->T_world_camera, keyframe->intrinsics,
-                                          keyframe->median_depth_m};
+  headers_[keyframe->id] =
+      KeyframeHeader{keyframe->utime, keyframe->frame_sequence, keyframe->T_world_camera,
+                     keyframe->intrinsics, keyframe->median_depth_m};
   segment_parent_.emplace(keyframe->segment, keyframe->segment);
   next_keyframe_id_ = std::max(next_keyframe_id_, keyframe->id + 1);
   next_segment_ = std::max(next_segment_, keyframe->segment + 1);
@@ -474,8 +474,9 @@ BackendSnapshot Backend::snapshot() const {
   for (const auto& [id, culled] : culled_) {
     snapshot.culled.push_back({id, culled.anchor_id, culled.T_anchor_keyframe, culled.information});
   }
-  std::sort(snapshot.culled.begin(), snapshot.culled.end(),
-            [](const CulledKeyframeRecord& a, const CulledKeyframeRecord& b) { return a.id < b.id; });
+  std::sort(
+      snapshot.culled.begin(), snapshot.culled.end(),
+      [](const CulledKeyframeRecord& a, const CulledKeyframeRecord& b) { return a.id < b.id; });
   for (const auto& [id, info] : keyframes_) {
     snapshot.records.push_back({id, info.segment, info.path_length_m});
   }
@@ -515,9 +516,9 @@ void Backend::restore(const BackendSnapshot& snapshot) {
     // The loaded map is the frame of reference (see the class comment).
     graph_.setFixed(node.id, true);
     keyframes_[node.id] = records.at(node.id);
-    headers_[node.id] = KeyframeHeader{keyframe->utime, keyframe->frame_sequence,
-                                       keyframe->T_world_camera, keyframe->intrinsics,
-                                       keyframe->median_depth_m};
+    headers_[node.id] =
+        KeyframeHeader{keyframe->utime, keyframe->frame_sequence, keyframe->T_world_camera,
+                       keyframe->intrinsics, keyframe->median_depth_m};
     segment_parent_.emplace(keyframe->segment, keyframe->segment);
     detector_.insertKeyframe(*keyframe);
   }
@@ -536,8 +537,8 @@ void Backend::restore(const BackendSnapshot& snapshot) {
     }
     culled_[record.id] =
         CulledKeyframe{record.anchor_id, record.T_anchor_keyframe, record.information};
-    keyframes_.emplace(record.id, records.count(record.id) != 0 ? records.at(record.id)
-                                                                 : KeyframeInfo{});
+    keyframes_.emplace(record.id,
+                       records.count(record.id) != 0 ? records.at(record.id) : KeyframeInfo{});
   }
   for (const auto& [segment, parent] : snapshot.segment_parents) segment_parent_[segment] = parent;
   first_segment_ = snapshot.first_segment;

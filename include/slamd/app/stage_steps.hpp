@@ -346,7 +346,7 @@ class PublishStep : public StepBase {
 /// A map written for a session, with what the session's manifest says of it.
 struct SavedMap {
   MapFileResult file;
-  std::int64_t voxels = 0;                           ///< leaves of the tree
+  std::int64_t voxels = 0;                          ///< leaves of the tree
   Eigen::Vector3d min_m = Eigen::Vector3d::Zero();  ///< extent, map frame (zero when empty)
   Eigen::Vector3d max_m = Eigen::Vector3d::Zero();
 };
@@ -420,7 +420,7 @@ class MappingStep : public StepBase {
   std::int64_t next_voxel_count_ns_ = 0;
   /// The back end's correction: uncorrected (filter) world -> corrected world.
   SE3 T_world_uncorrected_ = SE3::Identity();
-  bool snapshot_failing_ = false;  ///< the last periodic snapshot failed
+  bool snapshot_failing_ = false;    ///< the last periodic snapshot failed
   bool map_frozen_ = false;          ///< a loaded map that frames never change
   bool awaiting_map_frame_ = false;  ///< frames are not yet in the loaded map's frame
   std::atomic<std::int64_t> leaf_voxels_{0};

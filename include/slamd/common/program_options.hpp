@@ -22,11 +22,11 @@ namespace slamd {
 /// Exit codes shared by all programs.
 enum ExitCode : int {
   kExitOk = 0,
-  kExitFailure = 1,      ///< runtime failure
-  kExitUsage = 2,        ///< bad command line
-  kExitConfigError = 3,  ///< configuration file or value invalid
-  kExitSourceError = 4,  ///< input source could not be opened or failed
-  kExitOutputError = 5,  ///< an output file could not be written
+  kExitFailure = 1,       ///< runtime failure
+  kExitUsage = 2,         ///< bad command line
+  kExitConfigError = 3,   ///< configuration file or value invalid
+  kExitSourceError = 4,   ///< input source could not be opened or failed
+  kExitOutputError = 5,   ///< an output file could not be written
   kExitSessionError = 6,  ///< a session (--session-in) was refused
 };
 
