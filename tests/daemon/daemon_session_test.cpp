@@ -2,10 +2,15 @@
 // loads them (--session-in) and localises in that map, so its poses come out in the first run's
 // frame. Bad sessions are refused before anything starts.
 
+#include <sys/wait.h>
+
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <sstream>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -85,6 +90,110 @@ TEST_F(DaemonSessions, TheSecondHalfOfFr1IsLocalisedInTheMapOfTheFirst) {
   EXPECT_LT(both_ate_m, 0.015);
 }
 
+// The synthetic test: map a lap of the room and save; a new process that starts at
+// another place in the room (another motion, starting elsewhere) is relocalised within 1 s of
+// frames and its poses are in the first run's frame: the two runs together, under one alignment
+// to the room's ground truth, are as accurate as each alone.
+TEST_F(DaemonSessions, AStartElsewhereInTheMappedRoomIsLocalisedWithinASecond) {
+  const std::string session = (dir_ / "room").string();
+  Config lap = smallSyntheticConfig(0);
+  lap.set("synthetic.trajectory", "loop");
+  lap.set("backend.enabled", "true");
+  DaemonOverrides lap_outputs;
+  lap_outputs.source = "synthetic:room";
+  lap_outputs.trajectory_out = (dir_ / "lap.txt").string();
+  lap_outputs.groundtruth_out = (dir_ / "lap_truth.txt").string();
+  lap_outputs.session_out = session;
+  const DaemonSummary mapped = runToEnd(lap, lap_outputs);
+  ASSERT_GT(mapped.keyframes, 0);
+
+  // Another motion through the same room (same seed: same room), 4 s of it, with timestamps of
+  // its own so that the two runs can be evaluated together.
+  Config elsewhere = smallSyntheticConfig(120);
+  elsewhere.set("synthetic.trajectory", "random");
+  elsewhere.set("synthetic.start_time_s", "1600001000");
+  elsewhere.set("backend.enabled", "true");
+  elsewhere.set("backend.mode", "localize");
+  DaemonOverrides outputs;
+  outputs.source = "synthetic:room";
+  outputs.trajectory_out = (dir_ / "elsewhere.txt").string();
+  outputs.groundtruth_out = (dir_ / "elsewhere_truth.txt").string();
+  outputs.session_in = session;
+  const DaemonSummary localised = runToEnd(elsewhere, outputs);
+  EXPECT_EQ(localised.errors, 0u);
+  ASSERT_GE(localised.frames_before_localization, 0) << "never localised in the room's map";
+  EXPECT_LE(localised.frames_before_localization, 30) << "not localised within 1 s of frames";
+
+  Trajectory truth = readTumTrajectory(lap_outputs.groundtruth_out);
+  const Trajectory elsewhere_truth = readTumTrajectory(outputs.groundtruth_out);
+  truth.insert(truth.end(), elsewhere_truth.begin(), elsewhere_truth.end());
+  Trajectory both = readTumTrajectory(lap_outputs.trajectory_out);
+  const Trajectory second = readTumTrajectory(outputs.trajectory_out);
+  both.insert(both.end(), second.begin(), second.end());
+  const double lap_ate_m =
+      eval::computeAte(truth, readTumTrajectory(lap_outputs.trajectory_out)).translation_m.rmse;
+  const double second_ate_m = eval::computeAte(truth, second).translation_m.rmse;
+  const double both_ate_m = eval::computeAte(truth, both).translation_m.rmse;
+  std::printf(
+      "room: lap %.4f m (%lld keyframes); elsewhere localised at frame %lld, %.4f m alone, "
+      "%.4f m with the lap in one frame\n",
+      lap_ate_m, static_cast<long long>(mapped.keyframes),
+      static_cast<long long>(localised.frames_before_localization), second_ate_m, both_ate_m);
+  EXPECT_LT(both_ate_m, 0.03);
+}
+
+// backend.mode=slam (multi-session): a run that loads a session extends it. Its keyframes join
+// the loaded graph, the loaded keyframes stay where they were, and the session it saves holds
+// both runs' keyframes and a larger map.
+TEST_F(DaemonSessions, InSlamModeALoadedSessionIsExtendedAndSavedAgain) {
+  const std::string first = (dir_ / "first").string();
+  const std::string extended = (dir_ / "extended").string();
+  Config lap = smallSyntheticConfig(150);
+  lap.set("synthetic.trajectory", "loop");
+  lap.set("backend.enabled", "true");
+  DaemonOverrides lap_outputs;
+  lap_outputs.source = "synthetic:room";
+  lap_outputs.session_out = first;
+  runToEnd(lap, lap_outputs);
+
+  Config more = smallSyntheticConfig(150);
+  more.set("synthetic.trajectory", "random");
+  more.set("synthetic.start_time_s", "1600001000");
+  more.set("backend.enabled", "true");
+  more.set("backend.mode", "slam");
+  DaemonOverrides outputs;
+  outputs.source = "synthetic:room";
+  outputs.session_in = first;
+  outputs.session_out = extended;
+  const DaemonSummary second = runToEnd(more, outputs);
+  EXPECT_GE(second.frames_before_localization, 0) << "never localised in the loaded map";
+
+  const Session before = loadSession(first);
+  const Session after = loadSession(extended);
+  std::printf("slam mode: %lld keyframes and %lld map voxels loaded, %lld and %lld saved\n",
+              static_cast<long long>(before.info.keyframes),
+              static_cast<long long>(before.info.map_voxels),
+              static_cast<long long>(after.info.keyframes),
+              static_cast<long long>(after.info.map_voxels));
+  EXPECT_GT(after.info.keyframes, before.info.keyframes);
+  EXPECT_GT(after.info.map_voxels, before.info.map_voxels);
+  // The loaded keyframes are the map's frame of reference: saved again at the same poses.
+  std::size_t compared = 0;
+  for (const BackendSnapshot::Node& old_node : before.backend.nodes) {
+    for (const BackendSnapshot::Node& new_node : after.backend.nodes) {
+      if (new_node.id != old_node.id) continue;
+      EXPECT_LT((new_node.T_world_camera.translation() - old_node.T_world_camera.translation())
+                    .norm(),
+                1e-9);
+      EXPECT_TRUE(new_node.fixed);
+      ++compared;
+    }
+  }
+  EXPECT_EQ(compared, before.backend.nodes.size());
+  // The new keyframes are numbered after the loaded ones.
+  EXPECT_GE(after.backend.next_keyframe_id, before.backend.next_keyframe_id + 1);
+}
+
 // A session folder that is not one, a corrupt file, and another camera: each is refused before
 // the run starts, with the file and the problem named.
 TEST_F(DaemonSessions, BadSessionsAreRefusedBeforeTheRunStarts) {
@@ -112,6 +221,23 @@ TEST_F(DaemonSessions, BadSessionsAreRefusedBeforeTheRunStarts) {
     }
   };
   EXPECT_EQ(load(session, {}), "") << "the session just written must load";
+  // slamd-session-info reads it, and --verify loads it whole.
+  const std::string info_out = (dir_ / "info.txt").string();
+  const std::string info_tool =
+      (std::filesystem::read_symlink("/proc/self/exe").parent_path() / "slamd-session-info")
+          .string();
+  const auto runInfo = [&](const std::string& arguments) {
+    const int status =
+        std::system((info_tool + " " + arguments + " > '" + info_out + "' 2>&1").c_str());
+    std::ifstream in(info_out);
+    std::stringstream text;
+    text << in.rdbuf();
+    return std::make_pair(WIFEXITED(status) ? WEXITSTATUS(status) : -1, text.str());
+  };
+  const auto [info_status, info_text] = runInfo("--verify '" + session + "'");
+  EXPECT_EQ(info_status, 0) << info_text;
+  EXPECT_NE(info_text.find("keyframes"), std::string::npos) << info_text;
+  EXPECT_NE(info_text.find("OK"), std::string::npos) << info_text;
 
   const std::string missing = load((dir_ / "nowhere").string(), {});
   EXPECT_NE(missing.find("CURRENT"), std::string::npos) << missing;
@@ -135,6 +261,9 @@ TEST_F(DaemonSessions, BadSessionsAreRefusedBeforeTheRunStarts) {
   }
   const std::string corrupt = load(session, {});
   EXPECT_NE(corrupt.find(kSessionGraphFile), std::string::npos) << corrupt;
+  const auto [corrupt_status, corrupt_text] = runInfo("--verify '" + session + "'");
+  EXPECT_EQ(corrupt_status, 1) << corrupt_text;
+  EXPECT_NE(corrupt_text.find(kSessionGraphFile), std::string::npos) << corrupt_text;
 }
 
 }  // namespace
