@@ -33,12 +33,14 @@ void BackendStage::reset() {
   latest_keyframe_utime_ = 0;
   frames_seen_ = 0;
   stats_ = BackendStageStats();
-  if (restored_) restore(restored_);
+  if (restored_) restore(restored_, fix_restored_keyframes_);
 }
 
-void BackendStage::restore(std::shared_ptr<const BackendSnapshot> snapshot) {
-  backend_->restore(*snapshot);
+void BackendStage::restore(std::shared_ptr<const BackendSnapshot> snapshot,
+                           bool fix_loaded_keyframes) {
+  backend_->restore(*snapshot, fix_loaded_keyframes);
   restored_ = std::move(snapshot);
+  fix_restored_keyframes_ = fix_loaded_keyframes;
   for (const KeyframePtr& keyframe : restored_->keyframes) {
     keyframes_.push_back(KeyframePoseEntry{keyframe->id, keyframe->utime, keyframe->segment,
                                            backend_->pose(keyframe->id)});

@@ -140,6 +140,7 @@ struct SlamDaemon::Impl {
     std::future<std::shared_ptr<const BackendSnapshot>> snapshot;
     std::future<SavedMap> map;  ///< not valid without a mapper
     std::string map_path;       ///< where the mapping thread writes it
+    std::string clouds_path;    ///< and the keyframe clouds
     std::int64_t started_ns = 0;
   };
   std::optional<SessionSave> session_save;
@@ -248,10 +249,12 @@ struct SlamDaemon::Impl {
   /// Writes the session (--session-out) from the stopped pipeline's state; false (logged) when
   /// it could not be written.
   bool saveSession(const std::string& dir);
-  /// Writes a session of `snapshot`, the map through `save_map` (which writes it to the path
-  /// given); false (logged) when it could not be written.
+  /// Writes a session of `snapshot`, the map and keyframe clouds through `save_map` (which
+  /// writes them to the paths given); false (logged) when it could not be written.
+  using SessionMapWriter =
+      std::function<SavedMap(const std::string& map_path, const std::string& clouds_path)>;
   bool writeSession(const std::string& dir, const BackendSnapshot& snapshot,
-                    const std::function<SavedMap(const std::string&)>& save_map);
+                    const SessionMapWriter& save_map);
   /// SAVE_SESSION: asks the back-end and mapping threads for their parts...
   void startSessionSave(const slamd::command_t& command);
   /// ...and writes the session once both are in (called by the control loop).
@@ -380,6 +383,11 @@ void SlamDaemon::Impl::publishStatus(LcmBus& bus, StatusBuilder& builder, Pipeli
       source_stats.frames_dropped + steps->capture->stats().frames_dropped_paused;
   extras.extra_drops["vanishing"] = steps->vanishing ? steps->vanishing->stats() : 0;
   extras.tracking_state = steps->tracking->stats();
+  const bool not_localized = steps->publish->stats().awaiting_map_frame.load();
+  if (not_localized && extras.tracking_state != TrackingState::kLost &&
+      extras.tracking_state != TrackingState::kNotInitialized) {
+    extras.tracking_state = TrackingState::kNotLocalized;
+  }
   if (steps->mapping) {
     const MappingStepStats map = steps->mapping->stats();
     extras.map_occupied_voxels = map.occupied_voxels;
@@ -401,6 +409,12 @@ void SlamDaemon::Impl::publishStatus(LcmBus& bus, StatusBuilder& builder, Pipeli
         (extras.message.empty() ? "" : "; ") + std::string("memory ") +
         toString(memory_governor.level()) + " (" + std::to_string(static_cast<int>(resident_mb)) +
         " of " + std::to_string(daemon.memory_limit_mb) + " MB): fewer keyframes and kept clouds";
+  }
+  if (not_localized) {
+    extras.message += (extras.message.empty() ? "" : "; ") +
+                      std::string(
+                          "not yet localised in the loaded session's map: poses are in "
+                          "this run's own frame");
   }
   const std::string loss = steps->publish->stats().lossNote();
   if (!loss.empty()) extras.message += (extras.message.empty() ? "" : "; ") + loss;
@@ -529,7 +543,10 @@ void SlamDaemon::Impl::buildSteps(LcmBus& bus, DaemonPublisher& publisher) {
     s.mapping.emplace(*mapper, mapping_config, publisher, backend ? &s.map_corrections : nullptr,
                       &map_requests);
     s.mapping->watchMemoryPressure(&memory_pressure);
-    if (session) s.mapping->useLoadedMap(backend_config.mode == BackendMode::kLocalize);
+    if (session) {
+      s.mapping->useLoadedMap(backend_config.mode == BackendMode::kLocalize, session->map_path,
+                              session->keyframe_clouds_path);
+    }
   }
   if (backend) {
     s.backend.emplace(*backend, daemon.world_frame, publisher, &s.pose_corrections,
@@ -909,6 +926,15 @@ bool SlamDaemon::Impl::writeMetrics(const std::vector<StageStats>& stats) {
     json.key("max_background_optimization_ms").value(summary.max_background_optimization_ms);
     json.endObject();
   }
+  if (session) {
+    // The loaded session (issue 25): when this run was localised in its map.
+    json.key("session").beginObject();
+    json.key("loaded").value(session->generation_path);
+    json.key("mode").value(backendModeName(backend_config.mode));
+    json.key("frames_before_localization").value(summary.frames_before_localization);
+    json.key("poses_not_localized").value(static_cast<std::int64_t>(summary.poses_not_localized));
+    json.endObject();
+  }
   if (mapper) {
     // Kept keyframe clouds and how the map followed the back end's corrections (issue 24).
     const MapperStats& map_stats = mapper->stats();
@@ -1016,25 +1042,48 @@ void SlamDaemon::Impl::restoreSession() {
                          mismatch + "); its map cannot be localised in with " + daemon.source);
     }
   }
-  backend->restore(std::make_shared<const BackendSnapshot>(std::move(session->backend)));
+  // The loaded keyframes may move (slam mode) only when the map can follow them: every one of
+  // their clouds is kept again (or there is no map to follow).
+  bool map_follows = true;
+  std::size_t clouds_restored = 0;
   if (mapper && !session->map_path.empty()) {
     const MapFileResult loaded = mapper->loadMap(session->map_path);
     if (!loaded.ok) throw SessionError("session map " + session->map_path + ": " + loaded.error);
+    std::vector<KeyframeCloudRecord> clouds;
+    if (!session->keyframe_clouds_path.empty()) {
+      std::string error;
+      if (!readKeyframeCloudRecords(session->keyframe_clouds_path, clouds, &error)) {
+        throw SessionError(error);
+      }
+    }
+    const std::size_t saved_clouds = clouds.size();
+    if (mapping_config.keep_keyframe_clouds && saved_clouds > 0) {
+      clouds_restored = mapper->restoreKeyframeClouds(std::move(clouds));
+    }
+    map_follows = saved_clouds > 0 && clouds_restored == saved_clouds &&
+                  saved_clouds >= session->backend.keyframes.size();
   }
+  const bool fix_loaded_keyframes = backend_config.mode == BackendMode::kLocalize || !map_follows;
+  backend->restore(std::make_shared<const BackendSnapshot>(std::move(session->backend)),
+                   fix_loaded_keyframes);
   SLAMD_LOG_INFO(kLog) << "session " << session->generation_path << " loaded ("
                        << session->info.keyframes << " keyframes, " << session->info.landmarks
-                       << " landmarks, " << session->info.map_voxels << " map voxels, made "
+                       << " landmarks, " << session->info.map_voxels << " map voxels, "
+                       << clouds_restored << " keyframe clouds; made by "
                        << session->info.created_by << "); mode "
-                       << backendModeName(backend_config.mode)
-                       << ": poses are TRACKING_NOT_LOCALIZED until the first relocalisation";
+                       << backendModeName(backend_config.mode) << ", loaded keyframes "
+                       << (fix_loaded_keyframes ? "fixed" : "free to move with the map")
+                       << "; poses are TRACKING_NOT_LOCALIZED until the first relocalisation";
   session->backend = BackendSnapshot();  // moved into the back end
 }
 
 bool SlamDaemon::Impl::saveSession(const std::string& dir) {
   const auto start = std::chrono::steady_clock::now();
   const BackendSnapshot snapshot = backend->backend().snapshot();
-  const bool saved = writeSession(
-      dir, snapshot, [this](const std::string& path) { return saveMapForSession(*mapper, path); });
+  const bool saved =
+      writeSession(dir, snapshot, [this](const std::string& map_path, const std::string& clouds) {
+        return saveMapForSession(*mapper, map_path, clouds);
+      });
   if (saved) {
     SLAMD_LOG_INFO(kLog)
         << "session written to " << dir << " in "
@@ -1044,7 +1093,7 @@ bool SlamDaemon::Impl::saveSession(const std::string& dir) {
 }
 
 bool SlamDaemon::Impl::writeSession(const std::string& dir, const BackendSnapshot& snapshot,
-                                    const std::function<SavedMap(const std::string&)>& save_map) {
+                                    const SessionMapWriter& save_map) {
   try {
     SessionWriter writer(dir);
     writer.writeBackend(snapshot);
@@ -1059,9 +1108,14 @@ bool SlamDaemon::Impl::writeSession(const std::string& dir, const BackendSnapsho
     }
     summarizeSnapshot(snapshot, info);
     if (mapper) {
-      const SavedMap map = save_map(writer.pathFor(kSessionMapFile));
+      const SavedMap map =
+          save_map(writer.pathFor(kSessionMapFile), writer.pathFor(kSessionKeyframeCloudsFile));
       if (!map.file.ok) throw SessionError("cannot write the session's map: " + map.file.error);
+      if (!map.clouds_error.empty()) {
+        throw SessionError("cannot write the session's keyframe clouds: " + map.clouds_error);
+      }
       writer.addFile(kSessionMapFile);
+      if (map.clouds_written) writer.addFile(kSessionKeyframeCloudsFile);
       info.map_voxels = map.voxels;
       info.map_min_m = map.min_m;
       info.map_max_m = map.max_m;
@@ -1118,9 +1172,11 @@ void SlamDaemon::Impl::startSessionSave(const slamd::command_t& command) {
     std::error_code ignored;
     std::filesystem::create_directories(dir, ignored);
     save.map_path = (std::filesystem::path(dir) / "map.pending.ot").string();
+    save.clouds_path = (std::filesystem::path(dir) / "keyframe_clouds.pending.bin").string();
     MapRequest request;
     request.kind = MapRequest::Kind::kSave;
     request.path = save.map_path;
+    request.clouds_path = save.clouds_path;
     request.saved = std::make_shared<std::promise<SavedMap>>();
     save.map = request.saved->get_future();
     if (!map_requests.tryPush(std::move(request))) {
@@ -1145,18 +1201,25 @@ void SlamDaemon::Impl::progressSessionSave() {
   const std::shared_ptr<const BackendSnapshot> snapshot = save.snapshot.get();
   std::optional<SavedMap> map;
   if (save.map.valid()) map = save.map.get();
-  const bool saved = writeSession(save.dir, *snapshot, [&map, &save](const std::string& path) {
-    SavedMap moved = *map;
-    if (moved.file.ok) {
-      std::error_code error;
-      std::filesystem::rename(save.map_path, path, error);
-      if (error) {
-        moved.file.ok = false;
-        moved.file.error = "cannot move " + save.map_path + " to " + path + ": " + error.message();
-      }
-    }
-    return moved;
-  });
+  // The files the mapping thread wrote join the generation.
+  const auto moveInto = [](const std::string& from, const std::string& to, std::string& error) {
+    std::error_code failed;
+    std::filesystem::rename(from, to, failed);
+    if (failed) error = "cannot move " + from + " to " + to + ": " + failed.message();
+  };
+  const bool saved = writeSession(save.dir, *snapshot,
+                                  [&](const std::string& map_path, const std::string& clouds_path) {
+                                    SavedMap moved = *map;
+                                    if (moved.file.ok) {
+                                      moveInto(save.map_path, map_path, moved.file.error);
+                                      moved.file.ok = moved.file.error.empty();
+                                    }
+                                    if (moved.file.ok && moved.clouds_written) {
+                                      moveInto(save.clouds_path, clouds_path, moved.clouds_error);
+                                      moved.clouds_written = moved.clouds_error.empty();
+                                    }
+                                    return moved;
+                                  });
   if (saved) {
     SLAMD_LOG_INFO(kLog) << "SAVE_SESSION: session written to " << save.dir << " in "
                          << static_cast<double>(steadyNowNs() - save.started_ns) * 1e-9 << " s";

@@ -243,6 +243,7 @@ void PublishStep::process(EstimatedPacket packet) {
   pose.parent_frame = world_frame_;
   pose.child_frame = camera_frame_;
   tally_.record(pose.tracking_state, pose.utime);
+  tally_.awaiting_map_frame.store(awaiting_map_frame_, std::memory_order_relaxed);
   // Not yet in the loaded map's frame: said on every pose that has one (a lost pose says lost).
   if (awaiting_map_frame_ && pose.tracking_state != TrackingState::kLost &&
       pose.tracking_state != TrackingState::kNotInitialized) {
@@ -275,11 +276,31 @@ MappingStep::MappingStep(Mapper& mapper, const MappingConfig& config, DaemonPubl
 void MappingStep::reset() {
   mapper_.reset();
   T_world_uncorrected_ = SE3::Identity();
+  if (loaded_map_path_.empty()) return;
+  // The back end restores the loaded session: the map it was saved with comes back too.
+  awaiting_map_frame_ = true;
+  const MapFileResult loaded = mapper_.loadMap(loaded_map_path_);
+  if (!loaded.ok) {
+    SLAMD_LOG_WARN(kLog) << "RESET: the loaded session's map could not be read again ("
+                         << loaded.error << "); the map starts empty";
+    return;
+  }
+  std::vector<KeyframeCloudRecord> clouds;
+  std::string error;
+  if (!loaded_clouds_path_.empty() &&
+      !readKeyframeCloudRecords(loaded_clouds_path_, clouds, &error)) {
+    SLAMD_LOG_WARN(kLog) << "RESET: the loaded session's keyframe clouds could not be read again ("
+                         << error << "); its map cannot follow corrections";
+    return;
+  }
+  mapper_.restoreKeyframeClouds(std::move(clouds));
 }
 
-void MappingStep::useLoadedMap(bool frozen) {
+void MappingStep::useLoadedMap(bool frozen, std::string map_path, std::string clouds_path) {
   map_frozen_ = frozen;
   awaiting_map_frame_ = true;
+  loaded_map_path_ = std::move(map_path);
+  loaded_clouds_path_ = std::move(clouds_path);
 }
 
 MappingStepStats MappingStep::stats() const {
@@ -331,9 +352,15 @@ void MappingStep::forgetCulledKeyframes(
   }
 }
 
-SavedMap saveMapForSession(Mapper& mapper, const std::string& path) {
+SavedMap saveMapForSession(Mapper& mapper, const std::string& map_path,
+                           const std::string& clouds_path) {
   SavedMap saved;
-  saved.file = mapper.saveMap(path);
+  saved.file = mapper.saveMap(map_path);
+  if (!saved.file.ok) return saved;
+  const std::vector<KeyframeCloudRecord> clouds = mapper.keyframeCloudRecords();
+  if (!clouds.empty()) {
+    saved.clouds_written = writeKeyframeCloudRecords(clouds_path, clouds, &saved.clouds_error);
+  }
   const auto describe = [&saved](const auto& tree) {
     saved.voxels = static_cast<std::int64_t>(tree.getNumLeafNodes());
     if (tree.size() == 0) return;
@@ -353,7 +380,7 @@ void MappingStep::serveRequests() {
       continue;
     }
     if (request->saved) {
-      request->saved->set_value(saveMapForSession(mapper_, request->path));
+      request->saved->set_value(saveMapForSession(mapper_, request->path, request->clouds_path));
       continue;
     }
     const MapFileResult saved = mapper_.saveMap(request->path);

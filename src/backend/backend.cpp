@@ -493,7 +493,7 @@ BackendSnapshot Backend::snapshot() const {
   return snapshot;
 }
 
-void Backend::restore(const BackendSnapshot& snapshot) {
+void Backend::restore(const BackendSnapshot& snapshot, bool fix_loaded_keyframes) {
   if (previous_ != nullptr || graph_.numNodes() != 0 || !keyframes_.empty()) {
     throw std::logic_error("Backend::restore: the back end is not empty");
   }
@@ -513,8 +513,7 @@ void Backend::restore(const BackendSnapshot& snapshot) {
                                   " does not match its graph node or record");
     }
     graph_.addNode(node.id, node.T_world_camera);
-    // The loaded map is the frame of reference (see the class comment).
-    graph_.setFixed(node.id, true);
+    graph_.setFixed(node.id, fix_loaded_keyframes || node.fixed);
     keyframes_[node.id] = records.at(node.id);
     headers_[node.id] =
         KeyframeHeader{keyframe->utime, keyframe->frame_sequence, keyframe->T_world_camera,

@@ -1554,6 +1554,9 @@ Session loadSession(const std::string& dir) {
   }
   if (listed(kSessionMapFile))
     session.map_path = joinPath(session.generation_path, kSessionMapFile);
+  if (listed(kSessionKeyframeCloudsFile)) {
+    session.keyframe_clouds_path = joinPath(session.generation_path, kSessionKeyframeCloudsFile);
+  }
   if (listed(kSessionConfigFile)) {
     const std::vector<std::uint8_t>& bytes = contents[kSessionConfigFile];
     session.config_yaml.assign(bytes.begin(), bytes.end());

@@ -42,6 +42,22 @@ std::string poseError(const SE3& T) {
   return {};
 }
 
+/// Heap bytes of a kept cloud's points and colours, as keyframe_cloud_bytes counts them.
+std::int64_t cloudBytes(const PointCloud& cloud) {
+  return static_cast<std::int64_t>(cloud.points.size() * sizeof(Eigen::Vector3f) +
+                                   cloud.colors_bgr.size() * sizeof(ColorBgr));
+}
+
+/// How many parts of `part_points` (> 0) a cloud of `points` is cut into (at least one).
+std::size_t partsOf(std::size_t points, std::size_t part_points) {
+  // Not (points + part_points - 1) / part_points: a restored part_points may be near the limit.
+  return std::max<std::size_t>(1, points / part_points + (points % part_points != 0 ? 1 : 0));
+}
+
+/// Farther from the camera than any sensor measures (metres): a restored point beyond it is
+/// refused, which keeps the float arithmetic of its ray finite.
+constexpr float kMaxRecordPointM = 1e6f;
+
 /// Queue priority of steps done before any move (see Mapper::keyframes_queued_).
 constexpr double kFirst = std::numeric_limits<double>::infinity();
 
@@ -407,16 +423,19 @@ IntegrationResult Mapper::insertFiltered(IntegrationResult result, const SE3& T_
   return result;
 }
 
-bool Mapper::rejectUninsertable(const PointCloud& cloud_camera, const SE3& T_world_camera,
-                                IntegrationResult& result) {
+bool Mapper::originOnMap(const SE3& T_world_camera) const {
   const Eigen::Vector3d t = T_world_camera.translation();
   const octomap::point3d origin(static_cast<float>(t.x()), static_cast<float>(t.y()),
                                 static_cast<float>(t.z()));
-  const bool origin_on_map = withTree([&origin](const auto& tree) {
+  return withTree([&origin](const auto& tree) {
     octomap::OcTreeKey key;
     return tree.coordToKeyChecked(origin, key);
   });
-  if (!origin_on_map) {
+}
+
+bool Mapper::rejectUninsertable(const PointCloud& cloud_camera, const SE3& T_world_camera,
+                                IntegrationResult& result) {
+  if (!originOnMap(T_world_camera)) {
     result.status = IntegrationStatus::kBadPose;
     result.error = "sensor origin lies outside the map's extent";
     ++stats_.frames_bad_pose;
@@ -572,25 +591,23 @@ void Mapper::insertIntoTree(Tree& tree, const octomap::point3d& origin,
   result.update_ms = msSince(update_start);
 }
 
+bool Mapper::admitKeyframeCloud(std::int64_t bytes, std::int64_t freed_bytes) {
+  const std::int64_t budget = std::int64_t{config_.keyframe_cloud_budget_mb} << 20;
+  if (memory_pressure_ != MemoryPressure::kNone ||
+      stats_.keyframe_cloud_bytes - freed_bytes + bytes > budget) {
+    ++stats_.keyframe_clouds_refused;
+    return false;
+  }
+  return true;
+}
+
 bool Mapper::keepKeyframe(std::int64_t id, const PointCloud& cloud, const SE3& T_world_camera,
                           Utime utime) {
   if (!config_.keep_keyframe_clouds) return false;
-  if (memory_pressure_ != MemoryPressure::kNone) {
-    ++stats_.keyframe_clouds_refused;
-    return false;
-  }
-  const auto bytesOf = [](const PointCloud& c) {
-    return static_cast<std::int64_t>(c.points.size() * sizeof(Eigen::Vector3f) +
-                                     c.colors_bgr.size() * sizeof(ColorBgr));
-  };
-  std::int64_t total = stats_.keyframe_cloud_bytes;
   const auto existing = keyframes_.find(id);
-  if (existing != keyframes_.end()) total -= bytesOf(existing->second.cloud_camera);
-  const std::int64_t budget = std::int64_t{config_.keyframe_cloud_budget_mb} << 20;
-  if (total + bytesOf(cloud) > budget) {
-    ++stats_.keyframe_clouds_refused;
-    return false;
-  }
+  const std::int64_t freed =
+      existing != keyframes_.end() ? cloudBytes(existing->second.cloud_camera) : 0;
+  if (!admitKeyframeCloud(cloudBytes(cloud), freed)) return false;
   KeyframeCloud& kept = keyframes_[id];
   kept = KeyframeCloud{};
   // Sorted by elevation (image row), so that each part is a band of the image: rays of different
@@ -613,12 +630,11 @@ bool Mapper::keepKeyframe(std::int64_t id, const PointCloud& cloud, const SE3& T
         std::max(kept.farthest_point_m, static_cast<double>(cloud.points[i].norm()));
   }
   kept.part_points = static_cast<std::size_t>(config_.keyframe_step_points);
-  kept.parts =
-      std::max<int>(1, static_cast<int>((cloud.size() + kept.part_points - 1) / kept.part_points));
+  kept.parts = static_cast<int>(partsOf(cloud.size(), kept.part_points));
   kept.T_world_camera = T_world_camera;
   kept.T_world_camera_in_map = T_world_camera;
   kept.utime = utime;
-  stats_.keyframe_cloud_bytes = total + bytesOf(cloud);
+  stats_.keyframe_cloud_bytes += cloudBytes(cloud) - freed;
   stats_.keyframe_clouds = static_cast<std::int64_t>(keyframes_.size());
   return true;
 }
@@ -1140,9 +1156,7 @@ void Mapper::forgetKeyframe(std::int64_t keyframe_id) {
 }
 
 void Mapper::eraseKeyframe(std::map<std::int64_t, KeyframeCloud>::iterator it) {
-  stats_.keyframe_cloud_bytes -=
-      static_cast<std::int64_t>(it->second.cloud_camera.points.size() * sizeof(Eigen::Vector3f) +
-                                it->second.cloud_camera.colors_bgr.size() * sizeof(ColorBgr));
+  stats_.keyframe_cloud_bytes -= cloudBytes(it->second.cloud_camera);
   keyframes_.erase(it);
   stats_.keyframe_clouds = static_cast<std::int64_t>(keyframes_.size());
 }
@@ -1170,6 +1184,71 @@ std::vector<std::int64_t> Mapper::keptKeyframeIds() const {
   ids.reserve(keyframes_.size());
   for (const auto& entry : keyframes_) ids.push_back(entry.first);
   return ids;
+}
+
+std::vector<KeyframeCloudRecord> Mapper::keyframeCloudRecords() const {
+  std::vector<KeyframeCloudRecord> records;
+  records.reserve(keyframes_.size());
+  for (const auto& [id, keyframe] : keyframes_) {
+    if (keyframe.to_forget) continue;
+    KeyframeCloudRecord& record = records.emplace_back();
+    record.id = id;
+    record.utime = keyframe.utime;
+    record.cloud_camera = keyframe.cloud_camera;
+    // With nothing in the map (new, or taken out by a move), it goes in at its newest pose next.
+    record.T_world_camera_in_map =
+        keyframe.parts_in_map > 0 ? keyframe.T_world_camera_in_map : keyframe.T_world_camera;
+    record.part_points = keyframe.part_points;
+    record.parts_in_map = keyframe.parts_in_map;
+  }
+  return records;
+}
+
+bool Mapper::isRestorable(const KeyframeCloudRecord& record) const {
+  const PointCloud& cloud = record.cloud_camera;
+  if (keyframes_.count(record.id) != 0 || !poseError(record.T_world_camera_in_map).empty() ||
+      !originOnMap(record.T_world_camera_in_map) || cloud.empty() || record.part_points == 0) {
+    return false;
+  }
+  if (cloud.hasColor() && cloud.colors_bgr.size() != cloud.points.size()) return false;
+  for (const Eigen::Vector3f& p : cloud.points) {
+    if (!p.allFinite() || p.cwiseAbs().maxCoeff() > kMaxRecordPointM) return false;
+  }
+  const std::size_t parts = partsOf(cloud.size(), record.part_points);
+  return parts <= static_cast<std::size_t>(std::numeric_limits<int>::max()) &&
+         record.parts_in_map >= 0 && static_cast<std::size_t>(record.parts_in_map) <= parts;
+}
+
+std::size_t Mapper::restoreKeyframeClouds(std::vector<KeyframeCloudRecord> records) {
+  if (!config_.keep_keyframe_clouds) return 0;
+  std::size_t kept = 0;
+  for (KeyframeCloudRecord& record : records) {
+    if (!isRestorable(record)) {
+      ++stats_.keyframe_clouds_invalid;
+      continue;
+    }
+    const std::int64_t bytes = cloudBytes(record.cloud_camera);
+    if (!admitKeyframeCloud(bytes, 0)) continue;
+    KeyframeCloud& keyframe = keyframes_[record.id];
+    // The cloud is already in the mapper's part order: parts cut from it now are the parts that
+    // went into the map, so each can be taken out exactly.
+    keyframe.cloud_camera = std::move(record.cloud_camera);
+    for (const Eigen::Vector3f& p : keyframe.cloud_camera.points) {
+      keyframe.farthest_point_m =
+          std::max(keyframe.farthest_point_m, static_cast<double>(p.norm()));
+    }
+    keyframe.part_points = record.part_points;
+    keyframe.parts = static_cast<int>(partsOf(keyframe.cloud_camera.size(), record.part_points));
+    keyframe.parts_in_map = record.parts_in_map;
+    keyframe.T_world_camera = record.T_world_camera_in_map;
+    keyframe.T_world_camera_in_map = record.T_world_camera_in_map;
+    keyframe.utime = record.utime;
+    if (keyframe.parts_in_map < keyframe.parts) queueKeyframe(kFirst, record.id);
+    stats_.keyframe_cloud_bytes += bytes;
+    stats_.keyframe_clouds = static_cast<std::int64_t>(keyframes_.size());
+    ++kept;
+  }
+  return kept;
 }
 
 void Mapper::reset() {

@@ -93,7 +93,7 @@ class BackendStage {
 
   /// Loads a session's back end (Backend::restore) into the fresh stage: the loaded keyframes
   /// join the published keyframe list; RESET restores it again. Throws as Backend::restore.
-  void restore(std::shared_ptr<const BackendSnapshot> snapshot);
+  void restore(std::shared_ptr<const BackendSnapshot> snapshot, bool fix_loaded_keyframes);
 
   /// Forgets everything (the RESET command); a restored session is restored again.
   void reset();
@@ -120,6 +120,7 @@ class BackendStage {
   std::int64_t latest_keyframe_id_ = -1;
   std::int64_t frames_seen_ = 0;  ///< tracked frames of this run (restored sessions)
   std::shared_ptr<const BackendSnapshot> restored_;  ///< the session loaded, if any
+  bool fix_restored_keyframes_ = true;
   MemoryPressure memory_pressure_ = MemoryPressure::kNone;
   Utime latest_keyframe_utime_ = 0;
   std::int64_t sequence_ = 0;

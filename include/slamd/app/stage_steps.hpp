@@ -286,6 +286,8 @@ struct TrackingTally {
   /// Of the poses with an estimate, those published TRACKING_NOT_LOCALIZED (a loaded session's
   /// map not yet relocalised into); counted in the states above too.
   std::atomic<std::uint64_t> not_localized{0};
+  /// The latest pose was not yet in a loaded session's map frame (any thread).
+  std::atomic<bool> awaiting_map_frame{false};
   /// Frame time of the first pose of the current loss (predicted or lost), -1 while tracking.
   std::atomic<Utime> loss_start_utime{-1};
   std::atomic<Utime> latest_utime{0};
@@ -346,20 +348,27 @@ class PublishStep : public StepBase {
 /// A map written for a session, with what the session's manifest says of it.
 struct SavedMap {
   MapFileResult file;
+  /// The kept keyframe clouds were written (none are kept: nothing written, not an error).
+  bool clouds_written = false;
+  std::string clouds_error;                         ///< a sentence when they could not be written
   std::int64_t voxels = 0;                          ///< leaves of the tree
   Eigen::Vector3d min_m = Eigen::Vector3d::Zero();  ///< extent, map frame (zero when empty)
   Eigen::Vector3d max_m = Eigen::Vector3d::Zero();
 };
 
-/// Mapper::saveMap(path) and the map's size and extent (by the thread that owns the mapper).
-SavedMap saveMapForSession(Mapper& mapper, const std::string& path);
+/// Mapper::saveMap(map_path), the kept keyframe clouds to clouds_path (when any are kept), and
+/// the map's size and extent (by the thread that owns the mapper).
+SavedMap saveMapForSession(Mapper& mapper, const std::string& map_path,
+                           const std::string& clouds_path);
 
 /// A request from the control loop to the mapping step, which owns the map while running.
 struct MapRequest {
   enum class Kind { kSave, kPublish };
   Kind kind = Kind::kSave;
   std::string path;  ///< kSave: .bt or .ot
-  /// kSave for a session (SAVE_SESSION): the result goes here (the control loop waits on it).
+  /// kSave for a session (SAVE_SESSION): the keyframe clouds go to clouds_path, the result to
+  /// `saved` (the control loop waits on it).
+  std::string clouds_path;
   std::shared_ptr<std::promise<SavedMap>> saved;
 };
 
@@ -389,10 +398,12 @@ class MappingStep : public StepBase {
   /// Throws when a frame could not be mapped (the pipeline counts it against this stage).
   void process(const EstimatedPacket& packet);
   void reset() override;
-  /// The mapper holds a loaded session's map (before the pipeline starts). Frames are not
-  /// integrated until a correction puts them in the map's frame (BackendCorrection::
-  /// map_frame_known); with `frozen` (backend.mode=localize) never: the map stays as loaded.
-  void useLoadedMap(bool frozen);
+  /// The mapper holds a loaded session's map, read from `map_path`, and its keyframe clouds, from
+  /// `clouds_path` (empty: none) (before the pipeline starts). Frames are not integrated until a
+  /// correction puts them in the map's frame (BackendCorrection::map_frame_known); with `frozen`
+  /// (backend.mode=localize) never: the map stays as loaded. RESET reads both again (an empty
+  /// map, logged, when that generation of the session has been replaced since).
+  void useLoadedMap(bool frozen, std::string map_path, std::string clouds_path);
   /// Serves the waiting map requests (also called by the control thread after the stop).
   void serveRequests();
   MappingStepStats stats() const;
@@ -422,6 +433,8 @@ class MappingStep : public StepBase {
   SE3 T_world_uncorrected_ = SE3::Identity();
   bool snapshot_failing_ = false;    ///< the last periodic snapshot failed
   bool map_frozen_ = false;          ///< a loaded map that frames never change
+  std::string loaded_map_path_;      ///< the loaded session's map file, for RESET
+  std::string loaded_clouds_path_;   ///< and its keyframe clouds
   bool awaiting_map_frame_ = false;  ///< frames are not yet in the loaded map's frame
   std::atomic<std::int64_t> leaf_voxels_{0};
   std::atomic<std::int64_t> occupied_voxels_{0};

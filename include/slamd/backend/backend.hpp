@@ -54,14 +54,15 @@
 // after the merge. Per keyframe the cost is then the local window's, whatever the graph's size.
 //
 // Sessions (backend/session.hpp): snapshot() is what a later run needs to continue, restore()
-// loads it into an empty Backend. The loaded keyframes are fixed: they are the map's frame of
-// reference, and the map built from them (the OctoMap saved with them) cannot follow if they
-// move. The first keyframe added after restore() starts a segment of its own at its own
-// odometry pose, tied to the loaded map by the weak link only, and relocalises against it like a
-// segment after LOST; until then T_world_odometry is the identity and relocalization_pending is
-// true (the map's frame is not yet known). The caller numbers the new keyframes and segments
-// from nextKeyframeId() and nextSegment(). backend.mode (BackendMode) is the daemon's: both
-// modes restore the same way.
+// loads it into an empty Backend. The loaded keyframes are either all fixed (the map is a fixed
+// reference: localisation, or a map whose keyframe clouds were not kept and so cannot follow a
+// move), or keep the fixed flags they were saved with (the session's first keyframe holds the
+// gauge), so that loops and relocalisations correct the old keyframes too. The first keyframe added
+// after restore() starts a segment of its own at its own odometry pose, tied to the loaded map by
+// the weak link only, and relocalises against it like a segment after LOST; until then
+// T_world_odometry is the identity and relocalization_pending is true (the map's frame is not yet
+// known). The caller numbers the new keyframes and segments from nextKeyframeId() and
+// nextSegment(). backend.mode (BackendMode) is the daemon's: both modes restore the same way.
 //
 // Relocalisation (backend.relocalization): a keyframe starting a new segment (after LOST) is tied
 // to the previous one by a very weak edge only, and matched against every keyframe of earlier
@@ -156,8 +157,9 @@ class Backend {
   BackendSnapshot snapshot() const;
   /// Loads a snapshot into this Backend, which must be empty (nothing added, nothing restored):
   /// throws std::logic_error otherwise, and std::invalid_argument when the snapshot is not
-  /// consistent (an edge or culled keyframe naming a missing keyframe).
-  void restore(const BackendSnapshot& snapshot);
+  /// consistent (an edge or culled keyframe naming a missing keyframe). With
+  /// `fix_loaded_keyframes` every loaded keyframe is fixed (see the class comment).
+  void restore(const BackendSnapshot& snapshot, bool fix_loaded_keyframes);
   /// Keyframes loaded by restore().
   std::int64_t numRestoredKeyframes() const { return num_restored_; }
   /// One above every keyframe id and segment added or restored.

@@ -11,6 +11,7 @@
 //     graph.bin                   the back end's pose graph and bookkeeping (BackendSnapshot)
 //     vocabulary.voc              the place-recognition vocabulary (Vocabulary::write)
 //     map.ot                      the OctoMap (full tree with log-odds), when there is a map
+//     keyframe_clouds.bin         the mapper's keyframe clouds that went into map.ot, when kept
 //     config.yaml                 the configuration the session was made with (effectiveYaml)
 //
 // Saving is atomic: a save writes a new generation folder, fsyncs every file and the folder, then
@@ -87,6 +88,9 @@ inline constexpr const char* kSessionKeyframesFile = "keyframes.bin";
 inline constexpr const char* kSessionGraphFile = "graph.bin";
 inline constexpr const char* kSessionVocabularyFile = "vocabulary.voc";
 inline constexpr const char* kSessionMapFile = "map.ot";
+/// The mapper's kept keyframe clouds (down-sampled, camera frame) with the poses they went into
+/// map.ot at (written and read by the mapping side: writeKeyframeCloudRecords), when kept.
+inline constexpr const char* kSessionKeyframeCloudsFile = "keyframe_clouds.bin";
 inline constexpr const char* kSessionConfigFile = "config.yaml";
 
 /// A keyframe the back end merged into another (culling): it is kept as an offset only.
@@ -170,7 +174,9 @@ struct Session {
   SessionInfo info;
   BackendSnapshot backend;
   std::shared_ptr<const Vocabulary> vocabulary;
-  std::string map_path;     ///< path of map.ot, empty when the session has no map
+  std::string map_path;  ///< path of map.ot, empty when the session has no map
+  /// Path of keyframe_clouds.bin (verified, not parsed), empty when the session has none.
+  std::string keyframe_clouds_path;
   std::string config_yaml;  ///< config.yaml's text
 };
 

@@ -15,6 +15,13 @@
 //     mapper.addKeyframe(*frame, T_world_camera, keyframe_id);
 //     on corrected keyframe poses: mapper.correctKeyframePoses(poses);
 //     on every mapping cycle: mapper.catchUp(budget_s);  // bounded time per call
+//   sessions (keyframe_cloud_io.hpp) save the map with its keyframe clouds, at the same moment:
+//     mapper.saveMap(dir + "/map.ot");
+//     writeKeyframeCloudRecords(clouds_path, mapper.keyframeCloudRecords());
+//   and a later run loads both, the map first:
+//     mapper.loadMap(dir + "/map.ot");
+//     readKeyframeCloudRecords(clouds_path, records);
+//     mapper.restoreKeyframeClouds(std::move(records));
 //
 // Per frame: depth (CV_32FC1 metres, NaN = none) -> camera-frame cloud without NaN, inf, zero,
 // negative or out-of-range depths -> voxel-grid filter (camera frame) -> transform by
@@ -52,6 +59,7 @@
 #include "slamd/common/memory_pressure.hpp"
 #include "slamd/common/rgbd_frame.hpp"
 #include "slamd/common/se3.hpp"
+#include "slamd/mapping/keyframe_cloud_io.hpp"
 #include "slamd/mapping/map_io.hpp"
 #include "slamd/mapping/map_types.hpp"
 #include "slamd/mapping/mapping_config.hpp"
@@ -106,6 +114,7 @@ struct MapperStats {
   std::int64_t keyframe_clouds = 0;   ///< currently kept
   std::int64_t keyframe_clouds_refused = 0;   ///< not kept: the cloud budget, or memory pressure
   std::int64_t keyframe_clouds_released = 0;  ///< dropped under memory pressure, left in the map
+  std::int64_t keyframe_clouds_invalid = 0;  ///< records restoreKeyframeClouds() refused as invalid
   std::int64_t keyframe_cloud_bytes = 0;
   std::int64_t keyframes_moved = 0;        ///< contributions moved to corrected poses
   std::int64_t keyframes_taken_out = 0;    ///< contributions removed (forgotten keyframes)
@@ -211,7 +220,8 @@ class Mapper {
   /// Writes the snapshot now (config.snapshot_path); fails when no path is configured.
   MapFileResult saveSnapshot();
   /// Replaces the map by a saved .bt or .ot and continues mapping on it. The file's resolution
-  /// and tree type (OcTree or ColorOcTree) are adopted; kept keyframe clouds are forgotten.
+  /// and tree type (OcTree or ColorOcTree) are adopted; kept keyframe clouds are forgotten
+  /// (restoreKeyframeClouds() brings back those saved with the map).
   /// Subscribers resynchronise from the next full map.
   MapFileResult loadMap(const std::string& path);
 
@@ -246,6 +256,23 @@ class Mapper {
   std::size_t releaseKeyframeClouds(std::size_t keep_newest);
   /// Ids of the kept keyframe clouds (forgotten in steps or not yet), in increasing order.
   std::vector<std::int64_t> keptKeyframeIds() const;
+  /// Every kept keyframe cloud (not those being forgotten: what of them is still in the map stays
+  /// there after a restore, as a released cloud's part does), in id order, as it stands in the
+  /// map: a keyframe partway through a move has its parts still in at the pose they went in at,
+  /// and its correction is not recorded. Copies every cloud (keyframe_cloud_bytes).
+  std::vector<KeyframeCloudRecord> keyframeCloudRecords() const;
+  /// After loadMap() of the map these clouds went into (a session's map.ot with the records taken
+  /// when it was saved): they are kept again, as if this mapper had integrated them, so that
+  /// correctKeyframePoses() and forgetKeyframe() can move them or take them out exactly. Each
+  /// keyframe's newest pose is its T_world_camera_in_map (nothing is queued to move); parts not
+  /// yet in the map are queued for catchUp(), to go in at that pose. Records are taken in order.
+  /// Not kept: a record the cloud budget or memory pressure refuses (keyframe_clouds_refused), an
+  /// invalid one (keyframe_clouds_invalid): a pose that is not a finite rigid transform or whose
+  /// origin is off the map, no points, a point not finite or over 1e6 m away, colours that are
+  /// neither none nor one per point, part_points 0, parts_in_map outside 0 .. parts, an id kept
+  /// already (the first record of an id wins). Without keep_keyframe_clouds nothing is kept.
+  /// Returns how many were kept.
+  std::size_t restoreKeyframeClouds(std::vector<KeyframeCloudRecord> records);
   /// Empties the map (the RESET command) and forgets every keyframe cloud.
   void reset();
 
@@ -316,6 +343,12 @@ class Mapper {
   /// Skips an update sequence number and requests a full map (subscribers resynchronise).
   void requestResynchronisation();
   void forgetKeyframeClouds();
+  /// True when a cloud of `bytes` fits the budget (after `freed_bytes` of a cloud it replaces) and
+  /// memory pressure allows it; otherwise false, counted in keyframe_clouds_refused.
+  bool admitKeyframeCloud(std::int64_t bytes, std::int64_t freed_bytes);
+  /// False for an invalid record (see restoreKeyframeClouds()).
+  bool isRestorable(const KeyframeCloudRecord& record) const;
+  bool originOnMap(const SE3& T_world_camera) const;
   bool keepKeyframe(std::int64_t id, const PointCloud& cloud, const SE3& T_world_camera,
                     Utime utime);
   template <typename Function>
