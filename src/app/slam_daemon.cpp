@@ -131,6 +131,8 @@ struct SlamDaemon::Impl {
   std::shared_ptr<const Vocabulary> vocabulary;
   /// The session loaded (--session-in); its back end and map moved into the stages at start.
   std::unique_ptr<Session> session;
+  /// With a session: this run's keyframes are numbered from here on.
+  std::int64_t first_run_keyframe_id = 0;
   /// Control loop (producer) -> back-end thread (consumer): SAVE_SESSION's snapshot requests.
   SpscQueue<SnapshotRequest> snapshot_requests{4};
   /// A SAVE_SESSION waiting for the back end's snapshot and the mapping thread's map file
@@ -1013,6 +1015,16 @@ void SlamDaemon::Impl::finishBackend() {
   // arrived after the publish and mapping threads had finished.
   trajectory = backend->optimizedTrajectory();
   if (!mapper) return;
+  if (session && stats.frames_before_localization < 0) {
+    // Never placed in the loaded map: the keyframes held for it must not go in at poses of this
+    // run's own frame.
+    for (const std::int64_t id : mapper->keptKeyframeIds()) {
+      if (id >= first_run_keyframe_id) mapper->forgetKeyframe(id);
+    }
+    SLAMD_LOG_WARN(kLog) << "session: this run's keyframes were left out of the map (never "
+                            "localised in it)";
+    return;
+  }
   if (stats.optimizations > 0) {
     for (const std::int64_t id : backend->backend().culledKeyframeIds()) {
       mapper->forgetKeyframe(id);
@@ -1066,6 +1078,7 @@ void SlamDaemon::Impl::restoreSession() {
   const bool fix_loaded_keyframes = backend_config.mode == BackendMode::kLocalize || !map_follows;
   backend->restore(std::make_shared<const BackendSnapshot>(std::move(session->backend)),
                    fix_loaded_keyframes);
+  first_run_keyframe_id = backend->backend().nextKeyframeId();
   SLAMD_LOG_INFO(kLog) << "session " << session->generation_path << " loaded ("
                        << session->info.keyframes << " keyframes, " << session->info.landmarks
                        << " landmarks, " << session->info.map_voxels << " map voxels, "

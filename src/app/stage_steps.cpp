@@ -421,27 +421,32 @@ void MappingStep::process(const EstimatedPacket& packet) {
   }
   applyCorrections();
   serveRequests();
-  if (!map_frozen_ && !awaiting_map_frame_ && packet.frame && packet.odometry &&
+  std::optional<std::int64_t> keyframe_id;
+  if (packet.odometry && packet.odometry->is_keyframe && packet.odometry->keyframe) {
+    keyframe_id = packet.odometry->keyframe->id;
+  }
+  // Before the run is localised in a loaded map only keyframes are kept, held out of the map
+  // until a correction gives them poses in its frame (the back end may place this run long
+  // after tracking made them).
+  const bool mapped = !map_frozen_ && (!awaiting_map_frame_ || keyframe_id.has_value());
+  if (mapped && packet.frame && packet.odometry &&
       packet.pose.tracking_state != TrackingState::kLost &&
       packet.pose.tracking_state != TrackingState::kNotInitialized &&
       (!keyframes_only_ || packet.odometry->is_keyframe)) {
-    std::optional<std::int64_t> keyframe_id;
-    if (packet.odometry->is_keyframe && packet.odometry->keyframe) {
-      keyframe_id = packet.odometry->keyframe->id;
-    }
     const SE3 T_world_camera = T_world_uncorrected_ * packet.pose.T_world_camera;
     // A keyframe goes into the queue (kept, it goes in a part at a time, see catchUp); other
     // frames go in at once.
     const IntegrationResult result =
-        keyframe_id ? mapper_.addKeyframe(*packet.frame, T_world_camera, *keyframe_id)
-                    : mapper_.integrate(*packet.frame, T_world_camera);
+        awaiting_map_frame_ ? mapper_.holdKeyframe(*packet.frame, T_world_camera, *keyframe_id)
+        : keyframe_id       ? mapper_.addKeyframe(*packet.frame, T_world_camera, *keyframe_id)
+                            : mapper_.integrate(*packet.frame, T_world_camera);
     if (result.status == IntegrationStatus::kBadFrame ||
         result.status == IntegrationStatus::kBadPose) {
       // The pipeline counts a thrown error against this stage and carries on.
       throw std::runtime_error("frame not mapped: " + result.error);
     }
   }
-  catchUp(cycle_start_ns);
+  if (!awaiting_map_frame_) catchUp(cycle_start_ns);
   publishOutputs(mapper_.poll(mapper_.latestUtime()));
   // Counting voxels walks the whole tree (tens of milliseconds for millions of voxels): once a
   // second is plenty for the status channel, and no more often than keeps the walks under 1% of

@@ -20,6 +20,7 @@
 #include <unordered_map>
 #include <unordered_set>
 
+#include "slamd/common/binary_codec.hpp"
 #include "slamd/common/file_io.hpp"
 #include "slamd/common/log.hpp"
 
@@ -35,7 +36,7 @@ constexpr const char* kManifestTag = "slamd-session";
 constexpr const char* kGenerationPrefix = "generation-";
 
 // Record sizes in bytes, for checking a count against the bytes that remain.
-constexpr std::uint64_t kPoseBytes = 12 * 8;
+constexpr std::uint64_t kPoseBytes = kBinaryPoseBytes;
 constexpr std::uint64_t kInformationBytes = 36 * 8;
 // A keypoint: pt.x pt.y size angle response (floats), octave class_id (int32).
 constexpr std::uint64_t kKeypointBytes = 5 * 4 + 2 * 4;
@@ -67,113 +68,31 @@ std::string joinPath(const std::string& folder, const std::string& name) {
 }
 
 // ---------------------------------------------------------------------------------------------
-// Little-endian encoding.
+// Little-endian encoding (slamd/common/binary_codec.hpp) and what the session files add to it.
 
-class ByteWriter {
+void writeInformation(LittleEndianWriter& out, const Matrix6d& m) {
+  for (int r = 0; r < 6; ++r) {
+    for (int c = 0; c < 6; ++c) out.f64(m(r, c));
+  }
+}
+
+Matrix6d readInformation(LittleEndianReader& in) {
+  Matrix6d m;
+  for (int r = 0; r < 6; ++r) {
+    for (int c = 0; c < 6; ++c) m(r, c) = in.f64();
+  }
+  return m;
+}
+
+// Reads one session file from memory. A problem is refused naming the file (fail()); a read past
+// the end throws TruncatedBinaryError, which parseFile() refuses as "truncated (<where>)". Every
+// count is checked with fits() before anything is allocated for it.
+class SessionReader : public LittleEndianReader {
  public:
-  void u8(std::uint8_t v) { bytes_.push_back(static_cast<char>(v)); }
-  void u16(std::uint16_t v) { little(v, 2); }
-  void u32(std::uint32_t v) { little(v, 4); }
-  void u64(std::uint64_t v) { little(v, 8); }
-  void i32(std::int32_t v) { u32(static_cast<std::uint32_t>(v)); }
-  void i64(std::int64_t v) { u64(static_cast<std::uint64_t>(v)); }
-  void f32(float v) {
-    std::uint32_t bits = 0;
-    std::memcpy(&bits, &v, sizeof(bits));
-    u32(bits);
-  }
-  void f64(double v) {
-    std::uint64_t bits = 0;
-    std::memcpy(&bits, &v, sizeof(bits));
-    u64(bits);
-  }
-  void raw(const void* data, std::size_t size) {
-    bytes_.append(static_cast<const char*>(data), size);
-  }
-  void pose(const SE3& T) {
-    for (int r = 0; r < 3; ++r) {
-      for (int c = 0; c < 3; ++c) f64(T.linear()(r, c));
-    }
-    for (int r = 0; r < 3; ++r) f64(T.translation()(r));
-  }
-  void information(const Matrix6d& m) {
-    for (int r = 0; r < 6; ++r) {
-      for (int c = 0; c < 6; ++c) f64(m(r, c));
-    }
-  }
+  SessionReader(const std::vector<std::uint8_t>& bytes, std::string path)
+      : LittleEndianReader(bytes), path_(std::move(path)) {}
 
-  const std::string& bytes() const { return bytes_; }
-  void clear() { bytes_.clear(); }
-
- private:
-  void little(std::uint64_t v, int size) {
-    char buffer[8];
-    for (int i = 0; i < size; ++i) buffer[i] = static_cast<char>((v >> (8 * i)) & 0xffu);
-    bytes_.append(buffer, static_cast<std::size_t>(size));
-  }
-
-  std::string bytes_;
-};
-
-// Reads little-endian values from a buffer. A read past the end throws "truncated (<where>)" for
-// the file being read; every count is checked with fits() before anything is allocated for it.
-class ByteReader {
- public:
-  ByteReader(const std::vector<std::uint8_t>& bytes, std::string path)
-      : data_(bytes.data()), size_(bytes.size()), path_(std::move(path)) {}
-
-  /// What a truncation message names (e.g. "edge 17 of 40").
-  void setWhere(std::string where) { where_ = std::move(where); }
-  const std::string& where() const { return where_; }
-  std::size_t remaining() const { return size_ - position_; }
-  /// True when `count` records of `record_bytes` each fit in the bytes that remain.
-  bool fits(std::uint64_t count, std::uint64_t record_bytes) const {
-    return record_bytes == 0 || count <= remaining() / record_bytes;
-  }
   [[noreturn]] void fail(const std::string& problem) const { refuse(path_, problem); }
-  [[noreturn]] void truncated() const {
-    fail(where_.empty() ? "truncated" : "truncated (" + where_ + ")");
-  }
-
-  std::uint8_t u8() { return static_cast<std::uint8_t>(little(1)); }
-  std::uint16_t u16() { return static_cast<std::uint16_t>(little(2)); }
-  std::uint32_t u32() { return static_cast<std::uint32_t>(little(4)); }
-  std::uint64_t u64() { return little(8); }
-  std::int32_t i32() { return static_cast<std::int32_t>(u32()); }
-  std::int64_t i64() { return static_cast<std::int64_t>(u64()); }
-  float f32() {
-    const std::uint32_t bits = u32();
-    float v = 0.0f;
-    std::memcpy(&v, &bits, sizeof(v));
-    return v;
-  }
-  double f64() {
-    const std::uint64_t bits = u64();
-    double v = 0.0;
-    std::memcpy(&v, &bits, sizeof(v));
-    return v;
-  }
-  void raw(void* out, std::size_t size) {
-    if (remaining() < size) truncated();
-    std::memcpy(out, data_ + position_, size);
-    position_ += size;
-  }
-  /// A pose as written by ByteWriter::pose (checked later by the consistency check).
-  SE3 pose() {
-    SE3 T = SE3::Identity();
-    for (int r = 0; r < 3; ++r) {
-      for (int c = 0; c < 3; ++c) T.linear()(r, c) = f64();
-    }
-    for (int r = 0; r < 3; ++r) T.translation()(r) = f64();
-    return T;
-  }
-  Matrix6d information() {
-    Matrix6d m;
-    for (int r = 0; r < 6; ++r) {
-      for (int c = 0; c < 6; ++c) m(r, c) = f64();
-    }
-    return m;
-  }
   /// Checks the magic and the format version at the start of a file.
   void header(const char (&magic)[8]) {
     char found[8] = {};
@@ -196,20 +115,19 @@ class ByteReader {
   }
 
  private:
-  std::uint64_t little(int size) {
-    if (remaining() < static_cast<std::size_t>(size)) truncated();
-    std::uint64_t v = 0;
-    for (int i = 0; i < size; ++i) v |= static_cast<std::uint64_t>(data_[position_ + i]) << (8 * i);
-    position_ += static_cast<std::size_t>(size);
-    return v;
-  }
-
-  const std::uint8_t* data_;
-  std::size_t size_;
-  std::size_t position_ = 0;
   std::string path_;
-  std::string where_;
 };
+
+/// Parses `bytes`, the file at `path`, with `parse(SessionReader&)`.
+template <typename Parse>
+void parseFile(const std::vector<std::uint8_t>& bytes, const std::string& path, Parse&& parse) {
+  SessionReader in(bytes, path);
+  try {
+    parse(in);
+  } catch (const TruncatedBinaryError& e) {
+    refuse(path, e.what());
+  }
+}
 
 std::string ofCount(std::uint64_t index, std::uint64_t count) {
   return std::to_string(index + 1) + " of " + std::to_string(count);
@@ -217,7 +135,7 @@ std::string ofCount(std::uint64_t index, std::uint64_t count) {
 
 /// Reads a count of fixed-size records and checks they fit: a truncation names the first
 /// incomplete record ("truncated (edge 17 of 40)").
-std::uint64_t recordCount(ByteReader& in, const char* what, std::uint64_t record_bytes) {
+std::uint64_t recordCount(SessionReader& in, const char* what, std::uint64_t record_bytes) {
   in.setWhere(std::string("count of ") + what + "s");
   const std::uint64_t count = in.u64();
   if (!in.fits(count, record_bytes)) {
@@ -466,7 +384,7 @@ SnapshotProblem snapshotProblem(const BackendSnapshot& s) {
 // ---------------------------------------------------------------------------------------------
 // keyframes.bin and graph.bin.
 
-void writeDescriptors(ByteWriter& out, const cv::Mat& descriptors) {
+void writeDescriptors(LittleEndianWriter& out, const cv::Mat& descriptors) {
   if (descriptors.empty()) {
     out.i32(0);
     out.i32(0);
@@ -503,7 +421,7 @@ void writeDescriptors(ByteWriter& out, const cv::Mat& descriptors) {
   }
 }
 
-cv::Mat readDescriptors(ByteReader& in, std::uint64_t keypoints) {
+cv::Mat readDescriptors(SessionReader& in, std::uint64_t keypoints) {
   const std::int32_t rows = in.i32();
   const std::int32_t cols = in.i32();
   const std::int32_t type = in.i32();
@@ -547,12 +465,12 @@ cv::Mat readDescriptors(ByteReader& in, std::uint64_t keypoints) {
   return descriptors;
 }
 
-void writeKeyframe(ByteWriter& out, const Keyframe& keyframe) {
+void writeKeyframe(LittleEndianWriter& out, const Keyframe& keyframe) {
   out.i64(keyframe.id);
   out.i64(keyframe.segment);
   out.i64(keyframe.utime);
   out.i64(keyframe.frame_sequence);
-  out.pose(keyframe.T_world_camera);
+  writePose(out, keyframe.T_world_camera);
   const CameraIntrinsics& K = keyframe.intrinsics;
   out.f64(K.fx);
   out.f64(K.fy);
@@ -597,7 +515,7 @@ void writeKeyframe(ByteWriter& out, const Keyframe& keyframe) {
 }
 
 /// The count of a per-keypoint vector, checked against the bytes that remain.
-std::uint64_t vectorCount(ByteReader& in, const std::string& where, const char* what,
+std::uint64_t vectorCount(SessionReader& in, const std::string& where, const char* what,
                           std::uint64_t element_bytes) {
   const std::uint64_t count = in.u64();
   if (!in.fits(count, element_bytes)) {
@@ -607,7 +525,8 @@ std::uint64_t vectorCount(ByteReader& in, const std::string& where, const char* 
   return count;
 }
 
-std::shared_ptr<Keyframe> readKeyframe(ByteReader& in, std::uint64_t index, std::uint64_t count) {
+std::shared_ptr<Keyframe> readKeyframe(SessionReader& in, std::uint64_t index,
+                                       std::uint64_t count) {
   const std::string where = "keyframe " + ofCount(index, count);
   in.setWhere(where);
   if (in.remaining() < kKeyframeFixedBytes) in.truncated();
@@ -616,7 +535,7 @@ std::shared_ptr<Keyframe> readKeyframe(ByteReader& in, std::uint64_t index, std:
   keyframe->segment = in.i64();
   keyframe->utime = in.i64();
   keyframe->frame_sequence = in.i64();
-  keyframe->T_world_camera = in.pose();
+  keyframe->T_world_camera = readPose(in);
   CameraIntrinsics& K = keyframe->intrinsics;
   K.fx = in.f64();
   K.fy = in.f64();
@@ -673,7 +592,8 @@ std::shared_ptr<Keyframe> readKeyframe(ByteReader& in, std::uint64_t index, std:
 }
 
 std::string graphBytes(const BackendSnapshot& s) {
-  ByteWriter out;
+  std::string bytes;
+  LittleEndianWriter out(bytes);
   out.raw(kGraphMagic, sizeof(kGraphMagic));
   out.u32(kSessionFormatVersion);
   out.i64(s.first_segment);
@@ -685,23 +605,23 @@ std::string graphBytes(const BackendSnapshot& s) {
   out.u64(s.nodes.size());
   for (const BackendSnapshot::Node& node : s.nodes) {
     out.i64(node.id);
-    out.pose(node.T_world_camera);
+    writePose(out, node.T_world_camera);
     out.u8(node.fixed ? 1 : 0);
   }
   out.u64(s.edges.size());
   for (const PoseGraphEdge& edge : s.edges) {
     out.i64(edge.from_id);
     out.i64(edge.to_id);
-    out.pose(edge.T_from_to);
-    out.information(edge.information);
+    writePose(out, edge.T_from_to);
+    writeInformation(out, edge.information);
     out.u8(static_cast<std::uint8_t>(edge.kind));
   }
   out.u64(s.culled.size());
   for (const CulledKeyframeRecord& culled : s.culled) {
     out.i64(culled.id);
     out.i64(culled.anchor_id);
-    out.pose(culled.T_anchor_keyframe);
-    out.information(culled.information);
+    writePose(out, culled.T_anchor_keyframe);
+    writeInformation(out, culled.information);
   }
   out.u64(s.records.size());
   for (const KeyframeRecord& record : s.records) {
@@ -714,10 +634,10 @@ std::string graphBytes(const BackendSnapshot& s) {
     out.i64(segment);
     out.i64(parent);
   }
-  return out.bytes();
+  return bytes;
 }
 
-void readGraph(ByteReader& in, BackendSnapshot& s) {
+void readGraph(SessionReader& in, BackendSnapshot& s) {
   in.header(kGraphMagic);
   s.first_segment = in.i64();
   s.next_keyframe_id = in.i64();
@@ -731,7 +651,7 @@ void readGraph(ByteReader& in, BackendSnapshot& s) {
   for (std::uint64_t i = 0; i < num_nodes; ++i) {
     BackendSnapshot::Node& node = s.nodes[static_cast<std::size_t>(i)];
     node.id = in.i64();
-    node.T_world_camera = in.pose();
+    node.T_world_camera = readPose(in);
     const std::uint8_t fixed = in.u8();
     if (fixed > 1)
       in.fail("node " + ofCount(i, num_nodes) + ": fixed flag " + std::to_string(fixed));
@@ -743,8 +663,8 @@ void readGraph(ByteReader& in, BackendSnapshot& s) {
     PoseGraphEdge& edge = s.edges[static_cast<std::size_t>(i)];
     edge.from_id = in.i64();
     edge.to_id = in.i64();
-    edge.T_from_to = in.pose();
-    edge.information = in.information();
+    edge.T_from_to = readPose(in);
+    edge.information = readInformation(in);
     const std::uint8_t kind = in.u8();
     if (!isKnownEdgeKind(kind)) {
       in.fail("edge " + ofCount(i, num_edges) + ": unknown kind " + std::to_string(kind));
@@ -756,8 +676,8 @@ void readGraph(ByteReader& in, BackendSnapshot& s) {
   for (CulledKeyframeRecord& culled : s.culled) {
     culled.id = in.i64();
     culled.anchor_id = in.i64();
-    culled.T_anchor_keyframe = in.pose();
-    culled.information = in.information();
+    culled.T_anchor_keyframe = readPose(in);
+    culled.information = readInformation(in);
   }
   const std::uint64_t num_records = recordCount(in, "keyframe record", kRecordBytes);
   s.records.resize(static_cast<std::size_t>(num_records));
@@ -1199,8 +1119,7 @@ BackendSnapshot parseBackendFiles(const std::vector<std::uint8_t>& keyframes_bin
                                   const std::vector<std::uint8_t>& graph_bin,
                                   const std::string& label) {
   BackendSnapshot snapshot;
-  {
-    ByteReader in(keyframes_bin, joinPath(label, kSessionKeyframesFile));
+  parseFile(keyframes_bin, joinPath(label, kSessionKeyframesFile), [&snapshot](SessionReader& in) {
     in.header(kKeyframesMagic);
     in.setWhere("count of keyframes");
     const std::uint64_t count = in.u64();
@@ -1213,11 +1132,9 @@ BackendSnapshot parseBackendFiles(const std::vector<std::uint8_t>& keyframes_bin
       snapshot.keyframes.push_back(readKeyframe(in, i, count));
     }
     in.expectEnd();
-  }
-  {
-    ByteReader in(graph_bin, joinPath(label, kSessionGraphFile));
-    readGraph(in, snapshot);
-  }
+  });
+  parseFile(graph_bin, joinPath(label, kSessionGraphFile),
+            [&snapshot](SessionReader& in) { readGraph(in, snapshot); });
   const SnapshotProblem problem = snapshotProblem(snapshot);
   if (!problem.problem.empty()) refuse(joinPath(label, problem.file), problem.problem);
   return snapshot;
@@ -1384,20 +1301,16 @@ void SessionWriter::writeBackend(const BackendSnapshot& snapshot) {
                        ": inconsistent snapshot: " + problem.problem);
   }
   writeFile(kSessionKeyframesFile, [&snapshot](std::ostream& out) {
-    ByteWriter header;
-    header.raw(kKeyframesMagic, sizeof(kKeyframesMagic));
-    header.u32(kSessionFormatVersion);
-    header.u64(snapshot.keyframes.size());
-    out.write(header.bytes().data(), static_cast<std::streamsize>(header.bytes().size()));
+    LittleEndianWriter w(out);
+    w.raw(kKeyframesMagic, sizeof(kKeyframesMagic));
+    w.u32(kSessionFormatVersion);
+    w.u64(snapshot.keyframes.size());
     // One keyframe at a time: the file can be far larger than one keyframe's bytes.
-    ByteWriter record;
     for (const KeyframePtr& keyframe : snapshot.keyframes) {
-      record.clear();
-      writeKeyframe(record, *keyframe);
-      out.write(record.bytes().data(), static_cast<std::streamsize>(record.bytes().size()));
-      if (!out) return false;
+      writeKeyframe(w, *keyframe);
+      if (!w.flush()) return false;
     }
-    return true;
+    return w.flush();
   });
   const std::string graph = graphBytes(snapshot);
   writeFile(kSessionGraphFile, [&graph](std::ostream& out) {

@@ -14,6 +14,7 @@
 #include <sstream>
 #include <string>
 
+#include "slamd/common/binary_codec.hpp"
 #include "slamd/common/file_io.hpp"
 
 namespace slamd {
@@ -254,29 +255,6 @@ constexpr char kMagic[8] = {'S', 'L', 'A', 'M', 'D', 'V', 'O', 'C'};
 // count from allocating gigabytes before the size check catches it.
 constexpr std::int64_t kMaxNodes = 50000000;
 
-template <typename T>
-void put(std::string& out, const T& value) {
-  out.append(reinterpret_cast<const char*>(&value), sizeof(T));
-}
-
-// Reads values from a byte buffer, remembering whether it ran out.
-class Reader {
- public:
-  explicit Reader(const std::string& bytes) : bytes_(bytes) {}
-  template <typename T>
-  bool get(T& value) {
-    if (bytes_.size() - position_ < sizeof(T)) return false;
-    std::memcpy(&value, bytes_.data() + position_, sizeof(T));
-    position_ += sizeof(T);
-    return true;
-  }
-  std::size_t remaining() const { return bytes_.size() - position_; }
-
- private:
-  const std::string& bytes_;
-  std::size_t position_ = 0;
-};
-
 bool fail(std::string* error, const std::string& message) {
   if (error != nullptr) *error = message;
   return false;
@@ -286,131 +264,132 @@ bool fail(std::string* error, const std::string& message) {
 
 void Vocabulary::write(std::ostream& out) const {
   std::string payload;
+  LittleEndianWriter p(payload);
   for (const Node& node : nodes_) {
-    for (std::uint64_t w : node.centre) put(payload, w);
-    put(payload, static_cast<std::int32_t>(node.word));
-    put(payload, static_cast<std::int32_t>(node.children.size()));
-    for (int child : node.children) put(payload, static_cast<std::int32_t>(child));
+    for (std::uint64_t w : node.centre) p.u64(w);
+    p.i32(static_cast<std::int32_t>(node.word));
+    p.i32(static_cast<std::int32_t>(node.children.size()));
+    for (int child : node.children) p.i32(static_cast<std::int32_t>(child));
   }
-  for (double v : idf_) put(payload, v);
-  std::string header(kMagic, sizeof(kMagic));
-  put(header, kFileVersion);
-  put(header, static_cast<std::uint32_t>(branching_));
-  put(header, static_cast<std::uint32_t>(depth_));
-  put(header, static_cast<std::int64_t>(nodes_.size()));
-  put(header, static_cast<std::int64_t>(num_words_));
-  put(header, static_cast<std::uint64_t>(payload.size()));
+  for (double v : idf_) p.f64(v);
+  LittleEndianWriter w(out);
+  w.raw(kMagic, sizeof(kMagic));
   // The checksum covers the header fields after the magic and the payload.
-  const std::uint64_t checksum =
-      fnv1a64(payload.data(), payload.size(),
-              fnv1a64(header.data() + sizeof(kMagic), header.size() - sizeof(kMagic)));
-  put(payload, checksum);
-  out.write(header.data(), static_cast<std::streamsize>(header.size()));
-  out.write(payload.data(), static_cast<std::streamsize>(payload.size()));
+  w.startChecksum();
+  w.u32(kFileVersion);
+  w.u32(static_cast<std::uint32_t>(branching_));
+  w.u32(static_cast<std::uint32_t>(depth_));
+  w.i64(static_cast<std::int64_t>(nodes_.size()));
+  w.i64(static_cast<std::int64_t>(num_words_));
+  w.u64(static_cast<std::uint64_t>(payload.size()));
+  w.raw(payload.data(), payload.size());
+  w.u64(w.checksum());
+  w.flush();  // a failed write shows on `out`, which the caller checks
 }
 
-bool Vocabulary::read(std::istream& in, std::string* error) {
-  char magic[sizeof(kMagic)] = {};
-  if (!in.read(magic, sizeof(magic)) || std::memcmp(magic, kMagic, sizeof(kMagic)) != 0) {
-    return fail(error, "not a slamd vocabulary (bad magic)");
-  }
-  std::string header(sizeof(std::uint32_t) * 3 + sizeof(std::int64_t) * 2 + sizeof(std::uint64_t),
-                     '\0');
-  if (!in.read(header.data(), static_cast<std::streamsize>(header.size()))) {
-    return fail(error, "truncated header");
-  }
-  Reader h(header);  // header holds the fields after the magic
-  std::uint32_t version = 0, branching = 0, depth = 0;
-  std::int64_t num_nodes = 0, num_words = 0;
-  std::uint64_t payload_size = 0;
-  h.get(version);
-  h.get(branching);
-  h.get(depth);
-  h.get(num_nodes);
-  h.get(num_words);
-  h.get(payload_size);
-  if (version != kFileVersion) {
-    return fail(error, "unsupported format version " + std::to_string(version) + " (expected " +
-                           std::to_string(kFileVersion) + ")");
-  }
-  if (num_nodes < 1 || num_nodes > kMaxNodes || num_words < 1 || num_words > num_nodes ||
-      branching < 2 || branching > 1024 || depth < 1 || depth > 64) {
-    return fail(error, "inconsistent header (nodes " + std::to_string(num_nodes) + ", words " +
-                           std::to_string(num_words) + ")");
-  }
-  // Each node takes at least 40 bytes, each word 8: the declared size must fit both.
-  const std::uint64_t min_size =
-      static_cast<std::uint64_t>(num_nodes) * 40u + static_cast<std::uint64_t>(num_words) * 8u;
-  const std::uint64_t max_size = min_size + static_cast<std::uint64_t>(num_nodes) * 4u;
-  if (payload_size < min_size || payload_size > max_size) {
-    return fail(error, "inconsistent payload size " + std::to_string(payload_size));
-  }
-  // Read in pieces, so that memory grows only with bytes really present: a 60-byte file whose
-  // header declares 50 million nodes must not allocate 2 GB first.
-  std::string payload;
-  constexpr std::size_t kPiece = 1 << 20;
-  std::uint64_t checksum = 0;
-  while (payload.size() < payload_size) {
-    const std::size_t offset = payload.size();
-    const auto piece =
-        static_cast<std::size_t>(std::min<std::uint64_t>(kPiece, payload_size - offset));
-    payload.resize(offset + piece);
-    if (!in.read(payload.data() + offset, static_cast<std::streamsize>(piece))) break;
-  }
-  if (!in || !in.read(reinterpret_cast<char*>(&checksum), sizeof(checksum))) {
-    return fail(error, "truncated (expected " + std::to_string(payload_size + 8) +
-                           " bytes after the header)");
-  }
-  if (fnv1a64(payload.data(), payload.size(), fnv1a64(header.data(), header.size())) != checksum) {
-    return fail(error, "checksum mismatch (corrupt file)");
-  }
+bool Vocabulary::read(std::istream& stream, std::string* error) {
+  LittleEndianReader in(stream);
+  std::vector<Node> nodes;
+  std::vector<double> idf;
+  std::uint32_t branching = 0;
+  std::uint32_t depth = 0;
+  std::int64_t num_words = 0;
+  try {
+    char magic[sizeof(kMagic)] = {};
+    in.raw(magic, sizeof(magic));
+    if (std::memcmp(magic, kMagic, sizeof(kMagic)) != 0) {
+      return fail(error, "not a slamd vocabulary (bad magic)");
+    }
+    // The checksum covers the header fields after the magic and the payload.
+    in.startChecksum();
+    // Each where() completes the sentence "truncated ...".
+    in.setWhere("header");
+    const std::uint32_t version = in.u32();
+    branching = in.u32();
+    depth = in.u32();
+    const std::int64_t num_nodes = in.i64();
+    num_words = in.i64();
+    const std::uint64_t payload_size = in.u64();
+    if (version != kFileVersion) {
+      return fail(error, "unsupported format version " + std::to_string(version) + " (expected " +
+                             std::to_string(kFileVersion) + ")");
+    }
+    if (num_nodes < 1 || num_nodes > kMaxNodes || num_words < 1 || num_words > num_nodes ||
+        branching < 2 || branching > 1024 || depth < 1 || depth > 64) {
+      return fail(error, "inconsistent header (nodes " + std::to_string(num_nodes) + ", words " +
+                             std::to_string(num_words) + ")");
+    }
+    // Each node takes at least 40 bytes, each word 8: the declared size must fit both.
+    const std::uint64_t min_size =
+        static_cast<std::uint64_t>(num_nodes) * 40u + static_cast<std::uint64_t>(num_words) * 8u;
+    const std::uint64_t max_size = min_size + static_cast<std::uint64_t>(num_nodes) * 4u;
+    if (payload_size < min_size || payload_size > max_size) {
+      return fail(error, "inconsistent payload size " + std::to_string(payload_size));
+    }
+    // Read in pieces, so that memory grows only with bytes really present: a 60-byte file whose
+    // header declares 50 million nodes must not allocate 2 GB first.
+    in.setWhere("(expected " + std::to_string(payload_size + 8) + " bytes after the header)");
+    std::string payload;
+    constexpr std::size_t kPiece = 1 << 20;
+    while (payload.size() < payload_size) {
+      const std::size_t offset = payload.size();
+      const auto piece =
+          static_cast<std::size_t>(std::min<std::uint64_t>(kPiece, payload_size - offset));
+      payload.resize(offset + piece);
+      in.raw(payload.data() + offset, piece);
+    }
+    const std::uint64_t computed = in.checksum();
+    if (in.u64() != computed) return fail(error, "checksum mismatch (corrupt file)");
 
-  Reader r(payload);
-  std::vector<Node> nodes(static_cast<std::size_t>(num_nodes));
-  std::vector<bool> has_parent(nodes.size(), false);
-  std::vector<bool> word_seen(static_cast<std::size_t>(num_words), false);
-  for (std::size_t index = 0; index < nodes.size(); ++index) {
-    Node& node = nodes[index];
-    for (std::uint64_t& w : node.centre) {
-      if (!r.get(w)) return fail(error, "truncated node data");
-    }
-    std::int32_t word = 0;
-    std::int32_t num_children = 0;
-    if (!r.get(word) || !r.get(num_children)) return fail(error, "truncated node data");
-    if (word < -1 || word >= num_words || num_children < 0 || num_children > num_nodes) {
-      return fail(error, "invalid node " + std::to_string(index));
-    }
-    node.word = word;
-    for (std::int32_t c = 0; c < num_children; ++c) {
-      std::int32_t child = 0;
-      if (!r.get(child)) return fail(error, "truncated node data");
-      // Children always follow their parent and have one parent: the nodes form a tree.
-      if (child <= static_cast<std::int32_t>(index) || child >= num_nodes ||
-          has_parent[static_cast<std::size_t>(child)]) {
-        return fail(error, "invalid child of node " + std::to_string(index));
+    LittleEndianReader r(payload);
+    r.setWhere("node data");
+    nodes.resize(static_cast<std::size_t>(num_nodes));
+    std::vector<bool> has_parent(nodes.size(), false);
+    std::vector<bool> word_seen(static_cast<std::size_t>(num_words), false);
+    for (std::size_t index = 0; index < nodes.size(); ++index) {
+      Node& node = nodes[index];
+      for (std::uint64_t& w : node.centre) w = r.u64();
+      const std::int32_t word = r.i32();
+      const std::int32_t num_children = r.i32();
+      if (word < -1 || word >= num_words || num_children < 0 || num_children > num_nodes) {
+        return fail(error, "invalid node " + std::to_string(index));
       }
-      has_parent[static_cast<std::size_t>(child)] = true;
-      node.children.push_back(child);
-    }
-    if (node.children.empty() == (node.word < 0)) {
-      return fail(error, "node " + std::to_string(index) + " is neither a leaf nor inner node");
-    }
-    if (node.word >= 0) {
-      if (word_seen[static_cast<std::size_t>(node.word)]) {
-        return fail(error, "word " + std::to_string(node.word) + " appears twice");
+      node.word = word;
+      for (std::int32_t c = 0; c < num_children; ++c) {
+        const std::int32_t child = r.i32();
+        // Children always follow their parent and have one parent: the nodes form a tree.
+        if (child <= static_cast<std::int32_t>(index) || child >= num_nodes ||
+            has_parent[static_cast<std::size_t>(child)]) {
+          return fail(error, "invalid child of node " + std::to_string(index));
+        }
+        has_parent[static_cast<std::size_t>(child)] = true;
+        node.children.push_back(child);
       }
-      word_seen[static_cast<std::size_t>(node.word)] = true;
+      if (node.children.empty() == (node.word < 0)) {
+        return fail(error, "node " + std::to_string(index) + " is neither a leaf nor inner node");
+      }
+      if (node.word >= 0) {
+        if (word_seen[static_cast<std::size_t>(node.word)]) {
+          return fail(error, "word " + std::to_string(node.word) + " appears twice");
+        }
+        word_seen[static_cast<std::size_t>(node.word)] = true;
+      }
     }
+    for (std::size_t index = 1; index < nodes.size(); ++index) {
+      if (!has_parent[index]) return fail(error, "node " + std::to_string(index) + " unreachable");
+    }
+    r.setWhere("idf weights");
+    idf.resize(static_cast<std::size_t>(num_words));
+    for (double& v : idf) {
+      v = r.f64();
+      if (!std::isfinite(v) || v < 0.0) return fail(error, "invalid idf weight");
+    }
+    if (r.remaining() != 0) return fail(error, "trailing bytes in the payload");
+  } catch (const TruncatedBinaryError& e) {
+    // Shorter than the magic: not a vocabulary at all.
+    if (in.position() < sizeof(kMagic)) return fail(error, "not a slamd vocabulary (bad magic)");
+    return fail(error, "truncated " + e.where());
   }
-  for (std::size_t index = 1; index < nodes.size(); ++index) {
-    if (!has_parent[index]) return fail(error, "node " + std::to_string(index) + " unreachable");
-  }
-  std::vector<double> idf(static_cast<std::size_t>(num_words));
-  for (double& v : idf) {
-    if (!r.get(v)) return fail(error, "truncated idf weights");
-    if (!std::isfinite(v) || v < 0.0) return fail(error, "invalid idf weight");
-  }
-  if (r.remaining() != 0) return fail(error, "trailing bytes in the payload");
   nodes_ = std::move(nodes);
   idf_ = std::move(idf);
   num_words_ = static_cast<int>(num_words);

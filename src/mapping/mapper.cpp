@@ -332,17 +332,22 @@ bool Mapper::rejectBadPose(const SE3& T_world_camera, IntegrationResult& result)
 
 IntegrationResult Mapper::integrate(const RgbdFrame& frame, const SE3& T_world_camera,
                                     std::optional<std::int64_t> keyframe_id) {
-  return integrateFrame(frame, T_world_camera, keyframe_id, /*queue_keyframe=*/false);
+  return integrateFrame(frame, T_world_camera, keyframe_id, KeyframeInsertion::kNow);
 }
 
 IntegrationResult Mapper::addKeyframe(const RgbdFrame& frame, const SE3& T_world_camera,
                                       std::int64_t keyframe_id) {
-  return integrateFrame(frame, T_world_camera, keyframe_id, /*queue_keyframe=*/true);
+  return integrateFrame(frame, T_world_camera, keyframe_id, KeyframeInsertion::kQueued);
+}
+
+IntegrationResult Mapper::holdKeyframe(const RgbdFrame& frame, const SE3& T_world_camera,
+                                       std::int64_t keyframe_id) {
+  return integrateFrame(frame, T_world_camera, keyframe_id, KeyframeInsertion::kQueuedOrDropped);
 }
 
 IntegrationResult Mapper::integrateFrame(const RgbdFrame& frame, const SE3& T_world_camera,
                                          std::optional<std::int64_t> keyframe_id,
-                                         bool queue_keyframe) {
+                                         KeyframeInsertion insertion) {
   IntegrationResult result;
   if (rejectBadPose(T_world_camera, result)) return result;
   const auto t_cloud = Clock::now();
@@ -370,8 +375,7 @@ IntegrationResult Mapper::integrateFrame(const RgbdFrame& frame, const SE3& T_wo
   result.filter_ms = msSince(t_filter);
   result.points_filtered = filtered_.size();
   latest_utime_ = std::max(latest_utime_, frame.utime);
-  return insertFiltered(std::move(result), T_world_camera, keyframe_id, frame.utime,
-                        queue_keyframe);
+  return insertFiltered(std::move(result), T_world_camera, keyframe_id, frame.utime, insertion);
 }
 
 IntegrationResult Mapper::integrateCloud(const PointCloud& cloud_camera, const SE3& T_world_camera,
@@ -394,22 +398,24 @@ IntegrationResult Mapper::integrateCloud(const PointCloud& cloud_camera, const S
   result.depth.valid = static_cast<std::int64_t>(filtered_.size());
   result.points_filtered = filtered_.size();
   latest_utime_ = std::max(latest_utime_, utime);
-  return insertFiltered(std::move(result), T_world_camera, keyframe_id, utime, false);
+  return insertFiltered(std::move(result), T_world_camera, keyframe_id, utime,
+                        KeyframeInsertion::kNow);
 }
 
 IntegrationResult Mapper::insertFiltered(IntegrationResult result, const SE3& T_world_camera,
                                          std::optional<std::int64_t> keyframe_id, Utime utime,
-                                         bool queue_keyframe) {
+                                         KeyframeInsertion insertion) {
   if (!keyframe_id) return insertCameraCloud(filtered_, T_world_camera, std::move(result));
   forgetKeyframe(*keyframe_id);  // an id integrated again replaces the old one
   if (rejectUninsertable(filtered_, T_world_camera, result)) return result;
   if (!keepKeyframe(*keyframe_id, filtered_, T_world_camera, utime)) {
+    if (insertion == KeyframeInsertion::kQueuedOrDropped) return result;     // not in the map frame
     return insertCameraCloud(filtered_, T_world_camera, std::move(result));  // cannot move
   }
   result.keyframe_cloud_kept = true;
   ++stats_.frames_integrated;
   stats_.points_inserted += static_cast<std::int64_t>(filtered_.size());
-  if (queue_keyframe) {
+  if (insertion != KeyframeInsertion::kNow) {
     queueKeyframe(kFirst, *keyframe_id);
     return result;
   }

@@ -432,6 +432,38 @@ TEST(Mapper, AForgottenKeyframeLeavesTheMapAsIfItHadNeverBeenThere) {
   expectSameVoxels(*queued_twice.ocTree(), *once.ocTree());
 }
 
+// holdKeyframe (a run not yet localised in a loaded map): the cloud waits out of the map, goes in
+// at the pose a correction gives it, and is dropped, not put in at once, when it cannot be kept.
+TEST(Mapper, AHeldKeyframeGoesInAtItsCorrectedPoseOrNotAtAll) {
+  const BoxRoom room;
+  const MappingConfig config = testConfig();
+  const std::vector<SE3> views = test::lookAroundPoses(4);
+  ASSERT_GE(views.size(), 2u);
+  const RgbdFrame frame = room.render(views[1]);
+  SE3 wrong = views[1];  // the pose in the run's own frame, before the correction
+  wrong.translation().x() += 0.5;
+
+  Mapper held(config);
+  const IntegrationResult kept = held.holdKeyframe(frame, wrong, 7);
+  EXPECT_TRUE(kept.keyframe_cloud_kept);
+  EXPECT_EQ(held.countVoxels().leaves, 0u) << "a held keyframe went into the map";
+  held.correctKeyframePoses({{7, views[1]}});
+  held.catchUp(std::numeric_limits<double>::infinity());
+  Mapper reference(config);
+  reference.integrate(frame, views[1]);
+  expectSameVoxels(*held.ocTree(), *reference.ocTree());
+
+  Mapper pressed(config);
+  pressed.setMemoryPressure(MemoryPressure::kNear);
+  const IntegrationResult dropped = pressed.holdKeyframe(frame, wrong, 7);
+  EXPECT_FALSE(dropped.keyframe_cloud_kept);
+  pressed.catchUp(std::numeric_limits<double>::infinity());
+  EXPECT_EQ(pressed.countVoxels().leaves, 0u) << "a keyframe that could not be held went in";
+  // addKeyframe under the same pressure puts it in at once (the daemon's normal path).
+  pressed.addKeyframe(frame, wrong, 8);
+  EXPECT_GT(pressed.countVoxels().leaves, 0u);
+}
+
 // daemon.memory_limit_mb: under pressure no new keyframe cloud is kept (it goes in at once), and
 // releasing clouds keeps the newest ones; neither changes the map.
 TEST(Mapper, UnderMemoryPressureCloudsAreNotKeptOrAreReleasedAndTheMapStaysTheSame) {

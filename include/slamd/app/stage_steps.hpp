@@ -399,10 +399,12 @@ class MappingStep : public StepBase {
   void process(const EstimatedPacket& packet);
   void reset() override;
   /// The mapper holds a loaded session's map, read from `map_path`, and its keyframe clouds, from
-  /// `clouds_path` (empty: none) (before the pipeline starts). Frames are not integrated until a
-  /// correction puts them in the map's frame (BackendCorrection::map_frame_known); with `frozen`
-  /// (backend.mode=localize) never: the map stays as loaded. RESET reads both again (an empty
-  /// map, logged, when that generation of the session has been replaced since).
+  /// `clouds_path` (empty: none) (before the pipeline starts). Until a correction puts the run in
+  /// the map's frame (BackendCorrection::map_frame_known), keyframes are held out of the map
+  /// (Mapper::holdKeyframe) and other frames skipped; the correction's poses then put the held
+  /// keyframes in. With `frozen` (backend.mode=localize) nothing goes in: the map stays as
+  /// loaded. RESET reads both again (an empty map, logged, when that generation of the session
+  /// has been replaced since).
   void useLoadedMap(bool frozen, std::string map_path, std::string clouds_path);
   /// Serves the waiting map requests (also called by the control thread after the stop).
   void serveRequests();

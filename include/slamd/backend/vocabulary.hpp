@@ -61,7 +61,7 @@ class Vocabulary {
   int branching() const { return branching_; }
   int depth() const { return depth_; }
 
-  /// Binary serialisation, format version kFileVersion (little-endian host layout): magic
+  /// Binary serialisation, format version kFileVersion (little-endian): magic
   /// "SLAMDVOC", version, branching, depth, node and word counts, payload size, the nodes
   /// (centre, word, children), the idf weights, and an FNV-1a checksum of everything after the
   /// magic.

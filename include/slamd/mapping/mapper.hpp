@@ -178,6 +178,12 @@ class Mapper {
   /// cannot be moved (as without keep_keyframe_clouds).
   IntegrationResult addKeyframe(const RgbdFrame& frame, const SE3& T_world_camera,
                                 std::int64_t keyframe_id);
+  /// addKeyframe() for a keyframe whose pose is not yet in the map's frame (a run not yet
+  /// localised in a loaded session): kept and queued the same way, but a cloud that cannot be
+  /// kept is dropped (result.keyframe_cloud_kept false) instead of going in at once. The caller
+  /// runs catchUp() only once correctKeyframePoses() has given it a pose in the map's frame.
+  IntegrationResult holdKeyframe(const RgbdFrame& frame, const SE3& T_world_camera,
+                                 std::int64_t keyframe_id);
 
   /// Integrates a cloud already in the camera frame (no depth conversion, no filter).
   /// @param cloud_camera points in the camera optical frame, metres (non-finite points dropped).
@@ -319,12 +325,16 @@ class Mapper {
   template <typename Tree>
   void insertIntoTree(Tree& tree, const octomap::point3d& origin, const PointCloud& cloud_camera,
                       Contribution contribution, IntegrationResult& result);
+  /// What becomes of a keyframe's cloud: put in now, queued for catchUp() (put in at once when
+  /// it cannot be kept), or queued (dropped when it cannot be kept).
+  enum class KeyframeInsertion { kNow, kQueued, kQueuedOrDropped };
   IntegrationResult integrateFrame(const RgbdFrame& frame, const SE3& T_world_camera,
-                                   std::optional<std::int64_t> keyframe_id, bool queue_keyframe);
-  /// Integrates filtered_, or keeps it as a keyframe (queued, or put in at once).
+                                   std::optional<std::int64_t> keyframe_id,
+                                   KeyframeInsertion insertion);
+  /// Integrates filtered_, or keeps it as a keyframe (see KeyframeInsertion).
   IntegrationResult insertFiltered(IntegrationResult result, const SE3& T_world_camera,
                                    std::optional<std::int64_t> keyframe_id, Utime utime,
-                                   bool queue_keyframe);
+                                   KeyframeInsertion insertion);
   /// True (and counted) when the sensor origin is off the map or the cloud is empty.
   bool rejectUninsertable(const PointCloud& cloud_camera, const SE3& T_world_camera,
                           IntegrationResult& result);
