@@ -1069,8 +1069,10 @@ Manifest parseManifest(const std::string& path, const std::vector<std::uint8_t>&
       }
       manifest.files.push_back(file);
       info.files.emplace_back(file.name, file.size);
+    } else {
+      // Unknown keys are skipped: a later slamd may add information without changing the format.
+      continue;
     }
-    // Unknown keys are skipped: a later slamd may add information without changing the format.
     line.end();
   }
   for (const char* key : {"created_utime",

@@ -567,6 +567,18 @@ TEST(Session, ASessionOfAnOlderFormatOrAForeignManifestIsRefused) {
       << loadError(dir);
 }
 
+// A key this slamd does not know (information a later slamd of the same format added) is skipped.
+TEST(Session, AManifestLineWithAnUnknownKeyIsSkipped) {
+  const test::ScopedTempDir dir("session");
+  const std::string generation = saveSession(dir, syntheticSnapshot());
+  const fs::path manifest = dir / generation / kSessionManifestFile;
+  std::string text = readText(manifest);
+  text.insert(text.find('\n') + 1, "robot_name turtle 7\n");
+  writeBytes(manifest, text);
+  rewriteManifestVersion(manifest, "slamd-session " + std::to_string(kSessionFormatVersion));
+  EXPECT_EQ(loadError(dir), "");
+}
+
 TEST(Session, AManifestWithAValidChecksumButAWrongFileSizeIsRefused) {
   const test::ScopedTempDir dir("session");
   const std::string generation = saveSession(dir, syntheticSnapshot());
