@@ -9,9 +9,11 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <map>
 #include <optional>
 #include <sstream>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -20,6 +22,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "frame_codec_layout.hpp"
+#include "slamd/backend/session.hpp"
 #include "slamd/backend/vocabulary.hpp"
 #include "slamd/common/config.hpp"
 #include "slamd/comms/frame_codec.hpp"
@@ -28,6 +31,7 @@
 #include "slamd/comms/odometry_codec.hpp"
 #include "slamd/comms/pose_codec.hpp"
 #include "slamd/comms/status_codec.hpp"
+#include "slamd/mapping/keyframe_cloud_io.hpp"
 #include "slamd/mapping/mapper.hpp"
 #include "slamd/synth/synthetic_source.hpp"
 #include "test_data.hpp"
@@ -276,6 +280,69 @@ void vocabularySeeds(CorpusWriter& corpus) {
   corpus.add("vocabulary", 1, bytes);
 }
 
+Bytes fileBytes(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  return Bytes(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+}
+
+/// A session of two keyframes written by SessionWriter, and a keyframe-clouds file: the files
+/// session_files_fuzz mutates.
+void sessionSeeds(CorpusWriter& corpus, const fs::path& scratch) {
+  BackendSnapshot snapshot;
+  cv::RNG rng(11);
+  for (std::int64_t id = 0; id < 2; ++id) {
+    auto keyframe = std::make_shared<Keyframe>();
+    keyframe->id = id;
+    keyframe->utime = 1'600'000'000'000'000 + id * 33'333;
+    keyframe->T_world_camera.translation().x() = 0.1 * static_cast<double>(id);
+    keyframe->features.descriptors = cv::Mat(3, 32, CV_8UC1);
+    rng.fill(keyframe->features.descriptors, cv::RNG::UNIFORM, 0, 256);
+    for (int i = 0; i < 3; ++i) {
+      keyframe->features.keypoints.emplace_back(10.0f * i + 5.0f, 20.0f, 31.0f);
+      keyframe->features.pixels.emplace_back(10.0 * i + 5.0, 20.0);
+      keyframe->features.points.emplace_back(0.1 * i, 0.0, 1.0 + 0.1 * i);
+      keyframe->features.scale.push_back(1.0f);
+    }
+    keyframe->features.num_with_depth = 3;
+    snapshot.keyframes.push_back(keyframe);
+    snapshot.nodes.push_back({id, keyframe->T_world_camera, id == 0});
+    snapshot.records.push_back({id, 0, 0.1 * static_cast<double>(id)});
+  }
+  snapshot.edges.push_back(
+      {0, 1,
+       snapshot.keyframes[0]->T_world_camera.inverse() * snapshot.keyframes[1]->T_world_camera,
+       Matrix6d::Identity() * 100.0, EdgeKind::kOdometry});
+  snapshot.segment_parents.emplace_back(0, 0);
+  snapshot.next_keyframe_id = 2;
+  snapshot.next_segment = 1;
+  const fs::path session = scratch / "session";
+  SessionWriter writer(session.string());
+  writer.writeBackend(snapshot);
+  const Bytes keyframes = fileBytes(writer.pathFor(kSessionKeyframesFile));
+  const Bytes graph = fileBytes(writer.pathFor(kSessionGraphFile));
+  Bytes backend{static_cast<std::uint8_t>(keyframes.size() >> 8),
+                static_cast<std::uint8_t>(keyframes.size() & 0xff)};
+  backend.insert(backend.end(), keyframes.begin(), keyframes.end());
+  backend.insert(backend.end(), graph.begin(), graph.end());
+  corpus.add("session_files", 0, backend);
+
+  KeyframeCloudRecord record;
+  record.id = 1;
+  record.utime = 1'600'000'000'000'000;
+  for (int i = 0; i < 8; ++i) {
+    record.cloud_camera.points.emplace_back(0.1f * static_cast<float>(i), 0.0f, 1.0f);
+  }
+  record.part_points = 4;
+  record.parts_in_map = 2;
+  const fs::path clouds = scratch / "keyframe_clouds.bin";
+  std::string error;
+  if (!writeKeyframeCloudRecords(clouds.string(), {record}, &error)) {
+    throw std::runtime_error(error);
+  }
+  corpus.add("session_files", 1, fileBytes(clouds));
+  corpus.add("session_files", 3, fileBytes(clouds));
+}
+
 std::string firstLines(const fs::path& path, int count) {
   std::ifstream in(path);
   std::string line, out;
@@ -333,6 +400,9 @@ int main(int argc, char** argv) {
     mapSeeds(corpus, frame);
     configSeeds(corpus);
     vocabularySeeds(corpus);
+    const fs::path scratch = fs::path(argv[1]) / "scratch";
+    sessionSeeds(corpus, scratch);
+    fs::remove_all(scratch);
     tumSeeds(corpus);
     for (const auto& [target, count] : corpus.counts()) {
       std::printf("%-14s %3d seeds\n", target.c_str(), count);
