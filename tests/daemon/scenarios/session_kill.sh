@@ -43,7 +43,12 @@ for delay in 0 0.01 0.02 0.035 0.05; do
   wait_for 60 "slamd to track" grep -q "running; LCM" "slamd-$delay.log"
   sleep 2  # some keyframes, so that there is something to save
   "$SLAMD_BIN/slamd-cmd" --log-level error save-session room
-  until grep -q "command SAVE_SESSION" "slamd-$delay.log"; do sleep 0.002; done
+  # Polled every 2 ms (wait_for's 50 ms would miss most saves), for at most 20 s.
+  deadline=$((SECONDS + 20))
+  until grep -q "command SAVE_SESSION" "slamd-$delay.log"; do
+    [ $SECONDS -lt $deadline ] || fail "slamd never logged the SAVE_SESSION command"
+    sleep 0.002
+  done
   sleep "$delay"
   kill -KILL $SLAMD_PID
   wait $SLAMD_PID 2> /dev/null || true
