@@ -366,9 +366,7 @@ BackendUpdate Backend::add(const KeyframePtr& keyframe, const Matrix6d* covarian
     addEdge(edge);
   }
   keyframes_[keyframe->id] = info;
-  headers_[keyframe->id] =
-      KeyframeHeader{keyframe->utime, keyframe->frame_sequence, keyframe->T_world_camera,
-                     keyframe->intrinsics, keyframe->median_depth_m};
+  headers_[keyframe->id] = KeyframeHeader::of(*keyframe);
   segment_parent_.emplace(keyframe->segment, keyframe->segment);
   next_keyframe_id_ = std::max(next_keyframe_id_, keyframe->id + 1);
   next_segment_ = std::max(next_segment_, keyframe->segment + 1);
@@ -515,9 +513,7 @@ void Backend::restore(const BackendSnapshot& snapshot, bool fix_loaded_keyframes
     graph_.addNode(node.id, node.T_world_camera);
     graph_.setFixed(node.id, fix_loaded_keyframes || node.fixed);
     keyframes_[node.id] = records.at(node.id);
-    headers_[node.id] =
-        KeyframeHeader{keyframe->utime, keyframe->frame_sequence, keyframe->T_world_camera,
-                       keyframe->intrinsics, keyframe->median_depth_m};
+    headers_[node.id] = KeyframeHeader::of(*keyframe);
     segment_parent_.emplace(keyframe->segment, keyframe->segment);
     detector_.insertKeyframe(*keyframe);
   }
@@ -552,7 +548,6 @@ void Backend::restore(const BackendSnapshot& snapshot, bool fix_loaded_keyframes
   num_local_edges_ = static_cast<int>(snapshot.num_local_edges);
   num_relocalizations_ = static_cast<int>(snapshot.num_relocalizations);
   previous_ = snapshot.keyframes.back();
-  num_restored_ = static_cast<std::int64_t>(snapshot.keyframes.size());
   restored_link_pending_ = true;
 }
 

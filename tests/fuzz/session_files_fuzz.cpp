@@ -25,7 +25,8 @@ namespace {
 void fixChecksum(std::vector<std::uint8_t>& file) {
   if (file.size() < 8) return;
   const std::uint64_t hash = slamd::fnv1a64(file.data(), file.size() - 8);
-  for (int i = 0; i < 8; ++i) file[file.size() - 8 + i] = static_cast<std::uint8_t>(hash >> (8 * i));
+  for (int i = 0; i < 8; ++i)
+    file[file.size() - 8 + i] = static_cast<std::uint8_t>(hash >> (8 * i));
 }
 
 /// The clouds reader takes a path: one scratch file per process.
@@ -55,7 +56,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   if ((selector & 2) != 0) fixChecksum(file);
   {
     std::ofstream out(scratchPath(), std::ios::binary | std::ios::trunc);
-    out.write(reinterpret_cast<const char*>(file.data()), static_cast<std::streamsize>(file.size()));
+    out.write(reinterpret_cast<const char*>(file.data()),
+              static_cast<std::streamsize>(file.size()));
   }
   std::vector<slamd::KeyframeCloudRecord> records;
   std::string error;

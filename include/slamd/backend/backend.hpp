@@ -160,8 +160,6 @@ class Backend {
   /// consistent (an edge or culled keyframe naming a missing keyframe). With
   /// `fix_loaded_keyframes` every loaded keyframe is fixed (see the class comment).
   void restore(const BackendSnapshot& snapshot, bool fix_loaded_keyframes);
-  /// Keyframes loaded by restore().
-  std::int64_t numRestoredKeyframes() const { return num_restored_; }
   /// One above every keyframe id and segment added or restored.
   std::int64_t nextKeyframeId() const { return next_keyframe_id_; }
   std::int64_t nextSegment() const { return next_segment_; }
@@ -210,6 +208,11 @@ class Backend {
     SE3 T_world_camera = SE3::Identity();  ///< odometry pose
     CameraIntrinsics intrinsics;
     double median_depth_m = 0.0;
+
+    static KeyframeHeader of(const Keyframe& keyframe) {
+      return {keyframe.utime, keyframe.frame_sequence, keyframe.T_world_camera, keyframe.intrinsics,
+              keyframe.median_depth_m};
+    }
   };
 
   BackendUpdate add(const KeyframePtr& keyframe, const Matrix6d* covariance_prev_curr);
@@ -248,7 +251,6 @@ class Backend {
   std::unordered_map<std::int64_t, KeyframeHeader> headers_;  ///< keyframes in the graph
   std::int64_t next_keyframe_id_ = 0;
   std::int64_t next_segment_ = 0;
-  std::int64_t num_restored_ = 0;
   /// restore() happened and no keyframe has been added since.
   bool restored_link_pending_ = false;
   std::int64_t first_segment_ = 0;
