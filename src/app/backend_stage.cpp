@@ -1,6 +1,7 @@
 #include "slamd/app/backend_stage.hpp"
 
 #include <algorithm>
+#include <unordered_set>
 
 #include "slamd/common/log.hpp"
 
@@ -29,6 +30,7 @@ void BackendStage::reset() {
   backend_->setMemoryPressure(memory_pressure_);
   frames_ = KeyframeAnchoredTrajectory();
   keyframes_.clear();
+  keyframe_bytes_.clear();
   latest_keyframe_id_ = -1;
   latest_keyframe_utime_ = 0;
   frames_seen_ = 0;
@@ -101,8 +103,11 @@ std::optional<BackendCorrection> BackendStage::processKeyframe(const EstimatedPa
     } else {
       keyframes_.push_back(
           KeyframePoseEntry{keyframe->id, keyframe->utime, keyframe->segment, T_world_camera});
-      stats_.keyframe_bytes += static_cast<std::int64_t>(keyframeBytes(*keyframe));
+      const auto bytes = static_cast<std::int64_t>(keyframeBytes(*keyframe));
+      keyframe_bytes_[keyframe->id] = bytes;
+      stats_.keyframe_bytes += bytes;
     }
+    forgetCulledEarlierKeyframes(update.culled_earlier_ids);
     stats_.keyframes = static_cast<std::int64_t>(backend_->graph().numNodes());
     if (restored_ && stats_.frames_before_localization < 0 && backend_->newestKeyframeInMap()) {
       stats_.frames_before_localization = frames_seen_;
@@ -112,6 +117,23 @@ std::optional<BackendCorrection> BackendStage::processKeyframe(const EstimatedPa
   frames_.addFrame(odometry, T_world_camera);
   ++frames_seen_;
   return correction;
+}
+
+void BackendStage::forgetCulledEarlierKeyframes(const std::vector<std::int64_t>& ids) {
+  if (ids.empty()) return;
+  stats_.culled_keyframes += static_cast<std::int64_t>(ids.size());
+  for (const std::int64_t id : ids) {
+    const auto bytes = keyframe_bytes_.find(id);
+    if (bytes == keyframe_bytes_.end()) continue;
+    stats_.keyframe_bytes -= bytes->second;
+    keyframe_bytes_.erase(bytes);
+  }
+  const std::unordered_set<std::int64_t> culled(ids.begin(), ids.end());
+  keyframes_.erase(std::remove_if(keyframes_.begin(), keyframes_.end(),
+                                  [&culled](const KeyframePoseEntry& entry) {
+                                    return culled.count(entry.keyframe_id) != 0;
+                                  }),
+                   keyframes_.end());
 }
 
 std::optional<BackendCorrection> BackendStage::mergeFullOptimization(const FullOptimizationJob& job,

@@ -84,9 +84,9 @@ std::vector<std::int64_t> Backend::localWindow(std::int64_t keyframe_id) const {
   return window;
 }
 
-std::vector<LoopDetection> Backend::addLocalEdges(const Keyframe& keyframe, BackendUpdate& update) {
-  std::vector<LoopDetection> added;
-  if (config_.local_edges <= 0) return added;
+Backend::LocalMatches Backend::addLocalEdges(const Keyframe& keyframe, BackendUpdate& update) {
+  LocalMatches out;
+  if (config_.local_edges <= 0) return out;
   // The keyframes the local window reaches before this keyframe's own edges: an edge to one of
   // them closes a short cycle, which the window optimisation absorbs.
   const std::vector<std::int64_t> reach = localWindow(keyframe.id);
@@ -106,7 +106,6 @@ std::vector<LoopDetection> Backend::addLocalEdges(const Keyframe& keyframe, Back
   const std::vector<LoopDetection> matches = detector_.matchLocal(keyframe, allowed, prior);
   const KeyframeInfo& query = keyframes_.at(keyframe.id);
   for (const LoopDetection& match : matches) {
-    if (update.num_local_edges >= config_.local_edges) break;
     // False-match protection: the measured relative pose must agree with the current estimate
     // (odometry drift plus earlier corrections) within what drift allows over the path between.
     const SE3 T_estimate = graph_.pose(match.match_id).inverse() * T_world_query;
@@ -122,6 +121,8 @@ std::vector<LoopDetection> Backend::addLocalEdges(const Keyframe& keyframe, Back
       ++update.num_local_rejected;
       continue;
     }
+    out.agreeing.push_back(match);
+    if (update.num_local_edges >= config_.local_edges) continue;
     const PoseGraphEdge edge{match.match_id, keyframe.id, match.T_match_query, match.information,
                              EdgeKind::kLocal};
     if (addEdge(edge)) {
@@ -134,10 +135,10 @@ std::vector<LoopDetection> Backend::addLocalEdges(const Keyframe& keyframe, Back
       }
       ++update.num_local_edges;
       ++num_local_edges_;
-      added.push_back(match);
+      out.added.push_back(match);
     }
   }
-  return added;
+  return out;
 }
 
 void Backend::tryRelocalization(const Keyframe& keyframe, BackendUpdate& update) {
@@ -214,42 +215,36 @@ std::vector<std::int64_t> Backend::culledKeyframeIds() const {
   return ids;
 }
 
-const LoopDetection* Backend::redundancyMatch(const Keyframe& keyframe,
-                                              const std::vector<LoopDetection>& local) const {
-  // The keyframes that verifiably see this place now (enough inliers, still in the graph).
-  std::vector<const LoopDetection*> covering;
-  for (const LoopDetection& match : local) {
-    if (match.num_inliers >= config_.cull_min_inliers && graph_.hasNode(match.match_id)) {
-      covering.push_back(&match);
-    }
-  }
+Backend::CullRule Backend::cullRule() const {
   // Under memory pressure fewer keyframes are kept: the rule is relaxed.
-  int min_covering = config_.cull_min_covering_keyframes;
-  double min_covered_ratio = config_.cull_min_covered_ratio;
+  CullRule rule{config_.cull_min_covering_keyframes, config_.cull_min_covered_ratio};
   if (memory_pressure_ == MemoryPressure::kNear) {
-    min_covering = std::max(1, min_covering - 1);
-    min_covered_ratio = std::min(min_covered_ratio, 0.8);
+    rule.min_covering = std::max(1, rule.min_covering - 1);
+    rule.min_covered_ratio = std::min(rule.min_covered_ratio, 0.8);
   } else if (memory_pressure_ == MemoryPressure::kOver) {
-    min_covering = 1;
-    min_covered_ratio = std::min(min_covered_ratio, 0.7);
+    rule.min_covering = 1;
+    rule.min_covered_ratio = std::min(rule.min_covered_ratio, 0.7);
   }
-  if (static_cast<int>(covering.size()) < min_covering) return nullptr;
+  return rule;
+}
+
+bool Backend::covered(const FeatureSet& features, const CameraIntrinsics& K,
+                      const std::vector<SE3>& T_view_keyframe, const CullRule& rule) {
+  if (static_cast<int>(T_view_keyframe.size()) < rule.min_covering) return false;
   // ORB-SLAM's rule with views for landmarks: a feature with depth is covered by a keyframe
   // whose view it lies in (in front, inside the image) at the same or a finer scale (at most one
   // ORB pyramid level, 1.2x, farther away).
   constexpr double kMaxDepthRatio = 1.2;
   constexpr double kBorderPx = 8.0;
-  const CameraIntrinsics& K = keyframe.intrinsics;
-  const FeatureSet& features = keyframe.features;
   int with_depth = 0;
-  int covered = 0;
+  int num_covered = 0;
   for (std::size_t i = 0; i < features.points.size(); ++i) {
     if (!features.hasDepth(i)) continue;
     ++with_depth;
     const Eigen::Vector3d& X = features.points[i];
     int views = 0;
-    for (const LoopDetection* match : covering) {
-      const Eigen::Vector3d Y = match->T_match_query * X;
+    for (const SE3& T : T_view_keyframe) {
+      const Eigen::Vector3d Y = T * X;
       if (!(Y.z() > 0.0) || Y.z() > kMaxDepthRatio * X.z()) continue;
       const double u = K.fx * Y.x() / Y.z() + K.cx;
       const double v = K.fy * Y.y() / Y.z() + K.cy;
@@ -257,11 +252,38 @@ const LoopDetection* Backend::redundancyMatch(const Keyframe& keyframe,
         ++views;
       }
     }
-    if (views >= min_covering) ++covered;
+    if (views >= rule.min_covering) ++num_covered;
   }
-  if (with_depth == 0 || static_cast<double>(covered) < min_covered_ratio * with_depth) {
-    return nullptr;
+  return with_depth > 0 && static_cast<double>(num_covered) >= rule.min_covered_ratio * with_depth;
+}
+
+const LoopDetection* Backend::redundancyMatch(const Keyframe& keyframe,
+                                              const std::vector<LoopDetection>& local) const {
+  // The keyframes that verifiably see this place now (enough inliers, still in the graph).
+  std::vector<const LoopDetection*> covering;
+  std::vector<SE3> T_view_keyframe;
+  for (const LoopDetection& match : local) {
+    if (match.num_inliers >= config_.cull_min_inliers && graph_.hasNode(match.match_id)) {
+      covering.push_back(&match);
+      T_view_keyframe.push_back(match.T_match_query);
+    }
   }
+  const CullRule rule = cullRule();
+  const LoopDetection* best = nullptr;
+  for (const LoopDetection* match : covering) {
+    if (best == nullptr || match->num_inliers > best->num_inliers) best = match;
+  }
+  // A keyframe whose features are nearly all inliers of one match holds nothing that keyframe
+  // does not (the same view again): culling it leaves the map as it was before it came.
+  int with_depth = 0;
+  for (std::size_t i = 0; i < keyframe.features.size(); ++i) {
+    if (keyframe.features.hasDepth(i)) ++with_depth;
+  }
+  if (best != nullptr && with_depth > 0 &&
+      best->num_inliers >= rule.min_covered_ratio * with_depth) {
+    return best;
+  }
+  if (!covered(keyframe.features, keyframe.intrinsics, T_view_keyframe, rule)) return nullptr;
   // Merged into the one that sees it best.
   return *std::max_element(covering.begin(), covering.end(),
                            [](const LoopDetection* a, const LoopDetection* b) {
@@ -272,30 +294,116 @@ const LoopDetection* Backend::redundancyMatch(const Keyframe& keyframe,
 void Backend::cull(const Keyframe& keyframe, const LoopDetection& match, BackendUpdate& update) {
   // The offset kept is the optimised one (odometry and every local edge fused), not the single
   // match; its information is the match's (a conservative bound).
-  const SE3 T_match_keyframe = graph_.pose(match.match_id).inverse() * graph_.pose(keyframe.id);
-  const std::vector<PoseGraphEdge> removed = graph_.removeNode(keyframe.id);
-  for (const PoseGraphEdge& edge : removed) {
-    const std::int64_t other = edge.from_id == keyframe.id ? edge.to_id : edge.from_id;
-    auto& list = neighbours_[other];
-    list.erase(std::remove(list.begin(), list.end(), keyframe.id), list.end());
-  }
-  neighbours_.erase(keyframe.id);
-  headers_.erase(keyframe.id);
-  detector_.removeKeyframe(keyframe.id);
-  const PoseGraphEdge match_to_keyframe{match.match_id, keyframe.id, T_match_keyframe,
-                                        match.information, EdgeKind::kLocal};
-  // Its odometry edge and a loop edge go on to the keyframe it was merged into (the chain stays
-  // connected, the loop stays closed). Its local edges are dropped: the keyframe it merges into
-  // has its own, and composed with the same match they would count it many times over.
-  const PoseGraphEdge keyframe_to_match = invertedEdge(match_to_keyframe);
-  for (const PoseGraphEdge& edge : removed) {
-    const bool carried = edge.kind == EdgeKind::kOdometry || edge.kind == EdgeKind::kLoop;
-    if (!carried || edge.to_id != keyframe.id || edge.from_id == match.match_id) continue;
-    addEdge(composedEdge(edge, keyframe_to_match, edge.kind));
-  }
-  culled_[keyframe.id] = CulledKeyframe{match.match_id, T_match_keyframe, match.information};
+  mergeIntoAnchor(keyframe.id, match.match_id, match.information);
   update.culled = true;
   update.culled_into_id = match.match_id;
+}
+
+void Backend::cullCoveredEarlierKeyframes(const Keyframe& keyframe,
+                                          const std::vector<LoopDetection>& local,
+                                          BackendUpdate& update) {
+  // The new keyframe stays: it now verifiably sees the places of the keyframes it matched.
+  std::vector<const LoopDetection*> seen;
+  for (const LoopDetection& match : local) {
+    if (match.num_inliers < config_.cull_min_inliers || !graph_.hasNode(match.match_id)) continue;
+    addCoverer(keyframe.id, match.match_id);
+    seen.push_back(&match);
+  }
+  const CullRule rule = cullRule();
+  const std::int64_t gauge_id = graph_.nodeIds().front();
+  for (const LoopDetection* match : seen) {
+    const std::int64_t id = match->match_id;
+    if (!graph_.hasNode(id) || id == gauge_id || graph_.isFixed(id) ||
+        segment_starts_.count(id) != 0) {
+      continue;
+    }
+    const FeatureSet* features = detector_.features(id);
+    const auto header = headers_.find(id);
+    if (features == nullptr || header == headers_.end()) continue;
+    // Its views: every keyframe still in the graph that a verified match showed seeing it.
+    std::vector<SE3> T_view_keyframe;
+    const SE3 T_world_keyframe = graph_.pose(id);
+    for (const std::int64_t view : coverers_[id]) {
+      if (graph_.hasNode(view)) {
+        T_view_keyframe.push_back(graph_.pose(view).inverse() * T_world_keyframe);
+      }
+    }
+    if (!covered(*features, header->second.intrinsics, T_view_keyframe, rule)) continue;
+    // Merged into the new keyframe, with the information of the match that saw it.
+    mergeIntoAnchor(
+        id, keyframe.id,
+        invertedEdge({id, keyframe.id, match->T_match_query, match->information, EdgeKind::kLocal})
+            .information);
+    update.culled_earlier_ids.push_back(id);
+  }
+}
+
+void Backend::addCoverer(std::int64_t a, std::int64_t b) {
+  for (const auto& [from, to] : {std::make_pair(a, b), std::make_pair(b, a)}) {
+    auto& list = coverers_[from];
+    if (std::find(list.begin(), list.end(), to) == list.end()) list.push_back(to);
+  }
+}
+
+void Backend::mergeIntoAnchor(std::int64_t id, std::int64_t anchor_id,
+                              const Matrix6d& information) {
+  const SE3 T_anchor_keyframe = graph_.pose(anchor_id).inverse() * graph_.pose(id);
+  const std::vector<PoseGraphEdge> removed = graph_.removeNode(id);
+  for (const PoseGraphEdge& edge : removed) {
+    const std::int64_t other = edge.from_id == id ? edge.to_id : edge.from_id;
+    auto& list = neighbours_[other];
+    list.erase(std::remove(list.begin(), list.end(), id), list.end());
+  }
+  neighbours_.erase(id);
+  headers_.erase(id);
+  detector_.removeKeyframe(id);
+  for (const std::int64_t view : coverers_[id]) {
+    auto& list = coverers_[view];
+    list.erase(std::remove(list.begin(), list.end(), id), list.end());
+  }
+  coverers_.erase(id);
+
+  // The odometry chain through the keyframe is joined around it (prev -> next composed: its pose
+  // eliminated, as marginalising it out of the chain would). Loop and relocalisation edges, and
+  // odometry edges when the chain is not that simple (several ways in, a newest keyframe with no
+  // way out yet), go on to the anchor through the offset, so the chain stays connected and loops
+  // stay closed. Local edges are dropped: the anchor has its own, and composed with the same
+  // offset they would count it many times over.
+  const PoseGraphEdge anchor_to_keyframe{anchor_id, id, T_anchor_keyframe, information,
+                                         EdgeKind::kLocal};
+  const PoseGraphEdge keyframe_to_anchor = invertedEdge(anchor_to_keyframe);
+  std::vector<const PoseGraphEdge*> odometry_in;
+  std::vector<const PoseGraphEdge*> odometry_out;
+  for (const PoseGraphEdge& edge : removed) {
+    if (edge.kind != EdgeKind::kOdometry) continue;
+    (edge.to_id == id ? odometry_in : odometry_out).push_back(&edge);
+  }
+  const bool join_chain = odometry_in.size() == 1 && !odometry_out.empty();
+  for (const PoseGraphEdge& edge : removed) {
+    const bool carried = edge.kind == EdgeKind::kOdometry || edge.kind == EdgeKind::kLoop ||
+                         edge.kind == EdgeKind::kRelocalization;
+    if (!carried || (join_chain && edge.kind == EdgeKind::kOdometry)) continue;
+    if (edge.to_id == id && edge.from_id != anchor_id) {
+      addEdge(composedEdge(edge, keyframe_to_anchor, edge.kind));
+    } else if (edge.from_id == id && edge.to_id != anchor_id) {
+      addEdge(composedEdge(anchor_to_keyframe, edge, edge.kind));
+    }
+  }
+  if (join_chain) {
+    for (const PoseGraphEdge* out : odometry_out) {
+      if (out->to_id != odometry_in.front()->from_id) {
+        addEdge(composedEdge(*odometry_in.front(), *out, EdgeKind::kOdometry));
+      }
+    }
+  }
+  // Keyframes culled into this one earlier follow it to its anchor.
+  for (auto& entry : culled_) {
+    CulledKeyframe& earlier = entry.second;
+    if (earlier.anchor_id != id) continue;
+    earlier.anchor_id = anchor_id;
+    earlier.T_anchor_keyframe = T_anchor_keyframe * earlier.T_anchor_keyframe;
+  }
+  culled_[id] = CulledKeyframe{anchor_id, T_anchor_keyframe, information};
 }
 
 PoseGraphResult Backend::optimizeLocalWindow(std::int64_t keyframe_id) {
@@ -367,6 +475,7 @@ BackendUpdate Backend::add(const KeyframePtr& keyframe, const Matrix6d* covarian
   }
   keyframes_[keyframe->id] = info;
   headers_[keyframe->id] = KeyframeHeader::of(*keyframe);
+  if (first_keyframe || new_segment) segment_starts_.insert(keyframe->id);
   segment_parent_.emplace(keyframe->segment, keyframe->segment);
   next_keyframe_id_ = std::max(next_keyframe_id_, keyframe->id + 1);
   next_segment_ = std::max(next_segment_, keyframe->segment + 1);
@@ -381,7 +490,8 @@ BackendUpdate Backend::add(const KeyframePtr& keyframe, const Matrix6d* covarian
     full = update.relocalized;
   }
 
-  const std::vector<LoopDetection> local = addLocalEdges(*keyframe, update);
+  const LocalMatches local_matches = addLocalEdges(*keyframe, update);
+  const std::vector<LoopDetection>& local = local_matches.added;
   full = full || update.full_optimization;
   changed = changed || (config_.optimize_every_keyframe && update.num_local_edges > 0);
 
@@ -427,12 +537,16 @@ BackendUpdate Backend::add(const KeyframePtr& keyframe, const Matrix6d* covarian
   const LoopDetection* redundant =
       config_.cull_redundant_keyframes && !first_of_segment && !update.relocalized &&
               segmentRoot(keyframe->segment) == segmentRoot(first_segment_)
-          ? redundancyMatch(*keyframe, local)
+          ? redundancyMatch(*keyframe, local_matches.agreeing)
           : nullptr;
   if (redundant != nullptr) {
     cull(*keyframe, *redundant, update);
-    update.optimized = true;  // the keyframe list changed: downstream must hear of it
+  } else if (config_.cull_redundant_keyframes && config_.cull_earlier_keyframes &&
+             !first_of_segment && segmentRoot(keyframe->segment) == segmentRoot(first_segment_)) {
+    cullCoveredEarlierKeyframes(*keyframe, local_matches.agreeing, update);
   }
+  // The keyframe list changed: downstream must hear of it.
+  if (update.culled || !update.culled_earlier_ids.empty()) update.optimized = true;
   if (update.optimized) {
     update.corrected_poses.reserve(graph_.numNodes());
     for (std::int64_t id : graph_.nodeIds())
@@ -535,6 +649,13 @@ void Backend::restore(const BackendSnapshot& snapshot, bool fix_loaded_keyframes
     keyframes_.emplace(record.id,
                        records.count(record.id) != 0 ? records.at(record.id) : KeyframeInfo{});
   }
+  // A segment's first keyframe is never culled, so it is the segment's lowest id.
+  std::unordered_map<std::int64_t, std::int64_t> segment_first_id;
+  for (const auto& [id, info] : keyframes_) {
+    const auto [it, inserted] = segment_first_id.emplace(info.segment, id);
+    if (!inserted) it->second = std::min(it->second, id);
+  }
+  for (const auto& entry : segment_first_id) segment_starts_.insert(entry.second);
   for (const auto& [segment, parent] : snapshot.segment_parents) segment_parent_[segment] = parent;
   first_segment_ = snapshot.first_segment;
   segment_parent_.emplace(first_segment_, first_segment_);

@@ -95,7 +95,8 @@ const ConfigSchema<BackendConfig>& BackendConfig::schema() {
                   "geometric edges from each new keyframe to earlier keyframes that see the same "
                   "place; 0 = loops only")
           .number("local_max_candidates", &C::local_max_candidates, 1, 200, "",
-                  "candidates verified per keyframe for local edges (best BoW scores first)")
+                  "candidates verified per keyframe for local edges and culling (best BoW scores "
+                  "first; without culling the search stops at local_edges verified ones)")
           .number("local_min_inliers", &C::local_min_inliers, 6, 10000, "",
                   "inliers after refinement for a local edge")
           .number("local_search_radius_px", &C::local_search_radius_px, 2.0, 1000.0, "px",
@@ -131,8 +132,13 @@ const ConfigSchema<BackendConfig>& BackendConfig::schema() {
                 "false = in the back-end thread, before the next keyframe")
           .flag("cull_redundant_keyframes", &C::cull_redundant_keyframes,
                 "remove a new keyframe whose features other keyframes already see (ORB-SLAM's "
-                "rule, see cull_*); its odometry and loop edges are merged into the keyframe "
-                "that sees it best, its frames stay anchored through that keyframe")
+                "rule, see cull_*), or whose features are nearly all (cull_min_covered_ratio) "
+                "inliers of one verified match; its odometry and loop edges are merged into the "
+                "keyframe that sees it best, its frames stay anchored through that keyframe")
+          .flag("cull_earlier_keyframes", &C::cull_earlier_keyframes,
+                "with cull_redundant_keyframes: a kept new keyframe also culls the earlier "
+                "keyframes it verifiably matched whose features the keyframes that see them now "
+                "cover by the same rule; they are merged into the new keyframe")
           .number("cull_min_inliers", &C::cull_min_inliers, 6, 100000, "",
                   "inliers of a verified local match for that keyframe to count as seeing the "
                   "new keyframe's place")

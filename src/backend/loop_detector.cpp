@@ -363,6 +363,12 @@ void LoopDetector::insertKeyframe(const Keyframe& keyframe) {
   store(keyframe, vocabulary_->transform(keyframe.features.descriptors), path_length_m);
 }
 
+const FeatureSet* LoopDetector::features(std::int64_t id) const {
+  const auto found = std::find_if(entries_.begin(), entries_.end(),
+                                  [id](const Entry& e) { return e.id == id && !e.removed; });
+  return found != entries_.end() ? &found->features : nullptr;
+}
+
 std::unordered_map<std::int64_t, const FeatureSet*> LoopDetector::storedFeatures() const {
   std::unordered_map<std::int64_t, const FeatureSet*> features;
   for (const Entry& entry : entries_) {
@@ -458,8 +464,12 @@ std::vector<LoopDetection> LoopDetector::matchLocal(const Keyframe& keyframe,
                have_prior ? &T_prior : nullptr)) {
       attempt.status = LoopStatus::kLoopFound;
       matches.push_back(attempt);
-      // Enough edges: the remaining candidates would only cost verification time.
-      if (matches.size() >= static_cast<std::size_t>(std::max(1, config_.local_edges))) break;
+      // Enough edges: the remaining candidates would only cost verification time. Culling
+      // needs them all: every keyframe that sees the place is a view of it.
+      if (!config_.cull_redundant_keyframes &&
+          matches.size() >= static_cast<std::size_t>(std::max(1, config_.local_edges))) {
+        break;
+      }
     }
   }
   std::sort(matches.begin(), matches.end(), [](const LoopDetection& a, const LoopDetection& b) {

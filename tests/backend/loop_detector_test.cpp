@@ -471,13 +471,15 @@ PingPong pingPong(const RenderedKeyframes& lap, int laps) {
 struct CullingRun {
   std::vector<std::size_t> keyframes_after_lap;  ///< graph nodes at the end of each lap
   int culled = 0;
+  int culled_earlier = 0;    ///< of culled: earlier keyframes a kept new one made redundant
   double rms_error_m = 0.0;  ///< every keyframe (culled ones through backend.pose)
 };
 
 CullingRun runPingPong(const PingPong& run, bool cull,
-                       MemoryPressure pressure = MemoryPressure::kNone) {
+                       MemoryPressure pressure = MemoryPressure::kNone, bool cull_earlier = true) {
   BackendConfig config;
   config.cull_redundant_keyframes = cull;
+  config.cull_earlier_keyframes = cull_earlier;
   Backend backend(config, roomVocabulary());
   backend.setMemoryPressure(pressure);
   CullingRun out;
@@ -489,6 +491,15 @@ CullingRun runPingPong(const PingPong& run, bool cull,
       EXPECT_FALSE(backend.graph().hasNode(run.keyframes[k]->id));
       EXPECT_TRUE(backend.hasKeyframe(run.keyframes[k]->id));
       for (const auto& entry : update.corrected_poses) EXPECT_NE(entry.first, update.keyframe_id);
+    }
+    for (const std::int64_t id : update.culled_earlier_ids) {
+      ++out.culled;
+      ++out.culled_earlier;
+      EXPECT_LT(id, update.keyframe_id);
+      EXPECT_FALSE(backend.graph().hasNode(id));
+      EXPECT_TRUE(backend.hasKeyframe(id));
+      EXPECT_TRUE(backend.graph().hasNode(update.keyframe_id)) << "culled into the new keyframe";
+      for (const auto& entry : update.corrected_poses) EXPECT_NE(entry.first, id);
     }
     if (k + 1 == run.keyframes.size() || run.lap[k + 1] != run.lap[k]) {
       out.keyframes_after_lap.push_back(backend.graph().numNodes());
@@ -533,6 +544,59 @@ TEST(Backend, RevisitingTheSamePlaceAddsNoKeyframesWhenRedundantOnesAreCulled) {
   // What a culled keyframe held is still in the map: every keyframe's pose, culled or not, is
   // as good as without culling (within a centimetre).
   EXPECT_LT(culled.rms_error_m, kept.rms_error_m + 0.01);
+}
+
+// A kept new keyframe culls the earlier keyframes it makes redundant (ORB-SLAM culls its local
+// keyframes so): a place keeps the keyframes that see it from the most views, the graph holds
+// fewer keyframes, and it stays at what lap 2 left for the laps after.
+TEST(Backend, KeptKeyframesCullTheEarlierOnesTheyMakeRedundant) {
+  const RenderedKeyframes lap = renderKeyframes("room", 5, 40);
+  const PingPong run = pingPong(lap, 8);
+  const CullingRun both = runPingPong(run, true);
+  const CullingRun newest_only = runPingPong(run, true, MemoryPressure::kNone, false);
+  const auto print = [](const char* name, const CullingRun& r) {
+    std::printf("%s: graph after each lap", name);
+    for (std::size_t n : r.keyframes_after_lap) std::printf(" %zu", n);
+    std::printf(" (culled %d, %d of them earlier keyframes); RMS keyframe error %.4f m\n", r.culled,
+                r.culled_earlier, r.rms_error_m);
+  };
+  print("earlier keyframes culled too", both);
+  print("new keyframes culled only", newest_only);
+  ASSERT_EQ(both.keyframes_after_lap.size(), 8u);
+  EXPECT_GT(both.culled_earlier, 0);
+  EXPECT_EQ(newest_only.culled_earlier, 0);
+  EXPECT_LE(static_cast<double>(both.keyframes_after_lap.back()),
+            1.1 * static_cast<double>(both.keyframes_after_lap[1]));
+  EXPECT_LT(both.keyframes_after_lap.back(), newest_only.keyframes_after_lap.back());
+  EXPECT_LT(both.rms_error_m, newest_only.rms_error_m + 0.01);
+}
+
+// Culling an earlier keyframe keeps the back end whole: keyframes culled into it follow it to
+// its anchor, every culled keyframe keeps a pose, and a snapshot restores.
+TEST(Backend, AfterEarlierKeyframesAreCulledEveryAnchorIsInTheGraphAndASnapshotRestores) {
+  const RenderedKeyframes lap = renderKeyframes("room", 5, 40);
+  const PingPong run = pingPong(lap, 6);
+  Backend backend(BackendConfig(), roomVocabulary());
+  int culled_earlier = 0;
+  for (const KeyframePtr& keyframe : run.keyframes) {
+    culled_earlier += static_cast<int>(backend.addKeyframe(keyframe).culled_earlier_ids.size());
+  }
+  ASSERT_GT(culled_earlier, 0);
+  const BackendSnapshot snapshot = backend.snapshot();
+  for (const CulledKeyframeRecord& record : snapshot.culled) {
+    EXPECT_TRUE(backend.graph().hasNode(record.anchor_id)) << "keyframe " << record.id;
+    EXPECT_TRUE(backend.pose(record.id).matrix().allFinite());
+  }
+  for (const PoseGraphEdge& edge : snapshot.edges) {
+    EXPECT_TRUE(backend.graph().hasNode(edge.from_id) && backend.graph().hasNode(edge.to_id));
+  }
+  Backend restored(BackendConfig(), roomVocabulary());
+  EXPECT_NO_THROW(restored.restore(snapshot, false));
+  for (const KeyframePtr& keyframe : run.keyframes) {
+    EXPECT_LT((restored.pose(keyframe->id).translation() - backend.pose(keyframe->id).translation())
+                  .norm(),
+              1e-9);
+  }
 }
 
 // daemon.memory_limit_mb: near and over the limit the culling rule is relaxed, so fewer

@@ -24,6 +24,7 @@
 #include <cstdint>
 #include <memory>
 #include <optional>
+#include <unordered_map>
 #include <utility>
 #include <vector>
 
@@ -108,6 +109,9 @@ class BackendStage {
   /// Merges a finished whole-graph optimisation; its correction, if it moved anything.
   std::optional<BackendCorrection> mergeFullOptimization(const FullOptimizationJob& job,
                                                          Utime utime);
+  /// Earlier keyframes the back end culled into a new one leave the keyframe list and the
+  /// counts.
+  void forgetCulledEarlierKeyframes(const std::vector<std::int64_t>& ids);
 
   BackendConfig config_;
   std::shared_ptr<const Vocabulary> vocabulary_;
@@ -117,6 +121,7 @@ class BackendStage {
   /// Every tracked frame with the filter's pose, anchored to its keyframe.
   KeyframeAnchoredTrajectory frames_;
   std::vector<KeyframePoseEntry> keyframes_;  ///< id order; poses filled in on demand
+  std::unordered_map<std::int64_t, std::int64_t> keyframe_bytes_;  ///< this run's, by id
   std::int64_t latest_keyframe_id_ = -1;
   std::int64_t frames_seen_ = 0;  ///< tracked frames of this run (restored sessions)
   std::shared_ptr<const BackendSnapshot> restored_;  ///< the session loaded, if any

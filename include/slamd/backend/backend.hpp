@@ -34,14 +34,25 @@
 //
 // Culling (backend.cull_redundant_keyframes): a new keyframe is redundant when the earlier
 // keyframes whose verified local matches show they see its place already hold what it holds
-// (ORB-SLAM's rule, with views for landmarks: see BackendConfig). It is removed at once, after
+// (ORB-SLAM's rule, with views for landmarks: see BackendConfig), or when one verified match
+// holds nearly all its features (the same view again). It is removed at once, after
 // the optimisation that placed it: its node and edges leave the graph, its loop-detector entry
 // is dropped, and it stays only as an offset (the optimised one) from the keyframe M that sees
 // it best. Its odometry edge and a loop edge it closed are merged through that offset into edges
 // of M (composedEdge), and the next keyframe's odometry edge starts from M the same way, so the
-// chain stays connected. pose() of a culled keyframe is M's pose composed with the offset. Only
-// the newest keyframe is ever culled, so M is never culled later. Not culled: the first keyframe
-// of a segment, one that relocalised, one of a segment not yet joined to the map.
+// chain stays connected. pose() of a culled keyframe is M's pose composed with the offset. Not
+// culled: the first keyframe of a segment, one that relocalised, one of a segment not yet joined
+// to the map.
+//
+// A new keyframe that is kept can make earlier ones redundant (ORB-SLAM culls its local
+// keyframes the same way): every keyframe it verifiably matches (cull_min_inliers) counts it as
+// a view, and one whose views (every keyframe still in the graph that ever verifiably matched it,
+// at the current optimised poses) now cover it under the same rule is culled into the new
+// keyframe. Its odometry chain is joined around it (in and out edges composed); its other
+// odometry, loop and relocalisation edges move onto the new keyframe through the offset, and
+// keyframes culled into it earlier follow it there. Revisiting a place then replaces keyframes
+// rather than adding them. Not culled this way: a fixed keyframe (a loaded map's, the gauge),
+// the first keyframe of a segment.
 //
 // Whole-graph optimisations in the background (setFullOptimizationDeferred(true), as the daemon
 // runs it): a correction the local window cannot absorb is not run in addKeyframe. The keyframe
@@ -76,6 +87,7 @@
 #include <memory>
 #include <optional>
 #include <unordered_map>
+#include <unordered_set>
 #include <utility>
 #include <vector>
 
@@ -112,6 +124,8 @@ struct BackendUpdate {
   /// This keyframe was culled (redundant with culled_into_id); it is not in corrected_poses.
   bool culled = false;
   std::int64_t culled_into_id = -1;
+  /// Earlier keyframes this one made redundant, culled into it; not in corrected_poses.
+  std::vector<std::int64_t> culled_earlier_ids;
   /// Every keyframe's corrected T_world_camera (metres), when optimized.
   std::vector<std::pair<std::int64_t, SE3>> corrected_poses;
   /// Correction from the odometry world to the corrected world (see the class comment).
@@ -217,8 +231,12 @@ class Backend {
 
   BackendUpdate add(const KeyframePtr& keyframe, const Matrix6d* covariance_prev_curr);
   Matrix6d odometryInformation(const SE3& T_prev_curr) const;
-  /// Returns the verified local matches (those that became edges).
-  std::vector<LoopDetection> addLocalEdges(const Keyframe& keyframe, BackendUpdate& update);
+  struct LocalMatches {
+    std::vector<LoopDetection> added;     ///< those that became edges (at most local_edges)
+    std::vector<LoopDetection> agreeing;  ///< every one that agreed with the graph
+  };
+  /// Verifies the keyframe's local matches against the graph and adds the best as edges.
+  LocalMatches addLocalEdges(const Keyframe& keyframe, BackendUpdate& update);
   void tryRelocalization(const Keyframe& keyframe, BackendUpdate& update);
   /// Adds an edge to the graph and the adjacency.
   bool addEdge(const PoseGraphEdge& edge);
@@ -230,9 +248,29 @@ class Backend {
   /// one was merged into when it was culled.
   PoseGraphEdge odometryEdge(const Keyframe& keyframe, const Matrix6d* covariance_prev_curr,
                              bool new_segment, KeyframeInfo& info) const;
+  /// How many views must see a feature, and what fraction of the features with depth must be
+  /// seen, for a keyframe to be redundant (relaxed under memory pressure).
+  struct CullRule {
+    int min_covering = 3;
+    double min_covered_ratio = 0.9;
+  };
+  CullRule cullRule() const;
+  /// The culling rule on a keyframe's features, given the poses of the keyframes that see its
+  /// place relative to it (T_view_keyframe, one per view).
+  static bool covered(const FeatureSet& features, const CameraIntrinsics& K,
+                      const std::vector<SE3>& T_view_keyframe, const CullRule& rule);
   /// The verified local match that makes the keyframe redundant, if any (most inliers first).
   const LoopDetection* redundancyMatch(const Keyframe& keyframe,
                                        const std::vector<LoopDetection>& local) const;
+  /// After a new keyframe is kept: records the keyframes its verified matches (at least
+  /// cull_min_inliers) see, and culls into it those of them that their views now cover.
+  void cullCoveredEarlierKeyframes(const Keyframe& keyframe,
+                                   const std::vector<LoopDetection>& local, BackendUpdate& update);
+  /// Records that two keyframes verifiably see each other's place.
+  void addCoverer(std::int64_t a, std::int64_t b);
+  /// Takes keyframe `id` out of the graph and the loop detector; it stays as the optimised
+  /// offset from `anchor_id` (with `information`). See the class comment for its edges.
+  void mergeIntoAnchor(std::int64_t id, std::int64_t anchor_id, const Matrix6d& information);
   /// Re-optimises the local window around `keyframe_id` (bounded iterations).
   PoseGraphResult optimizeLocalWindow(std::int64_t keyframe_id);
   /// Removes the keyframe from the graph and the loop detector, merging its odometry edge into
@@ -249,6 +287,10 @@ class Backend {
   std::unordered_map<std::int64_t, std::int64_t> segment_parent_;  ///< joined segments (union-find)
   std::unordered_map<std::int64_t, CulledKeyframe> culled_;
   std::unordered_map<std::int64_t, KeyframeHeader> headers_;  ///< keyframes in the graph
+  /// Keyframes in the graph that verifiably see each keyframe's place (cull_min_inliers).
+  std::unordered_map<std::int64_t, std::vector<std::int64_t>> coverers_;
+  /// First keyframes of segments (never culled: each holds its segment's link).
+  std::unordered_set<std::int64_t> segment_starts_;
   std::int64_t next_keyframe_id_ = 0;
   std::int64_t next_segment_ = 0;
   /// restore() happened and no keyframe has been added since.

@@ -98,9 +98,14 @@ struct BackendConfig {
   /// place hold what it holds: ORB-SLAM's rule (90% of a keyframe's points seen by at least 3
   /// other keyframes), with views for landmarks. A feature with depth counts as seen by a
   /// keyframe whose verified local match (at least cull_min_inliers inliers) puts it inside that
-  /// keyframe's image, in front, at most 1.2x (one ORB level) farther away. Revisiting a place
-  /// then adds no keyframes; only new ground does.
+  /// keyframe's image, in front, at most 1.2x (one ORB level) farther away. A keyframe whose
+  /// features with depth are nearly all (cull_min_covered_ratio) inliers of one verified match
+  /// is the same view again and redundant too. Revisiting a place then adds no keyframes; only
+  /// new ground does.
   bool cull_redundant_keyframes = true;
+  /// A kept new keyframe also culls the earlier keyframes it matched that are now covered by the
+  /// same rule (their views: every keyframe in the graph that ever verifiably matched them).
+  bool cull_earlier_keyframes = true;
   int cull_min_inliers = 100;
   int cull_min_covering_keyframes = 3;
   double cull_min_covered_ratio = 0.9;

@@ -94,12 +94,13 @@ class LoopDetector {
 
   /// Local (covisibility) matches of a keyframe not yet stored: the best BoW candidates among
   /// the stored keyframes `allowed` accepts, recent ones included (backend.local_max_candidates
-  /// of them), each verified with RANSAC + refinement (backend.local_min_inliers). Every verified
-  /// one is returned (status kLoopFound, best inliers first) with T_match_query and an
-  /// information matrix from the refinement floored by backend.local_min_sigma_*. Nothing is
-  /// stored and no consistency is required: the caller checks each against its pose estimate.
-  /// With `prior`, descriptors are matched near the projections the prior predicts
-  /// (backend.local_search_radius_px) instead of over all pairs.
+  /// of them), each verified with RANSAC + refinement (backend.local_min_inliers); without
+  /// culling (backend.cull_redundant_keyframes), the search stops at backend.local_edges verified
+  /// ones. Every verified one is returned (status kLoopFound, best inliers first) with
+  /// T_match_query and an information matrix from the refinement floored by
+  /// backend.local_min_sigma_*. Nothing is stored and no consistency is required: the caller checks
+  /// each against its pose estimate. With `prior`, descriptors are matched near the projections the
+  /// prior predicts (backend.local_search_radius_px) instead of over all pairs.
   std::vector<LoopDetection> matchLocal(const Keyframe& keyframe, const KeyframeFilter& allowed,
                                         const PosePrior& prior = PosePrior());
 
@@ -112,6 +113,8 @@ class LoopDetector {
   /// exclusion and path lengths count it). Returns false for an unknown or removed id.
   bool removeKeyframe(std::int64_t id);
 
+  /// The features of a searchable stored keyframe (valid until the detector changes), or null.
+  const FeatureSet* features(std::int64_t id) const;
   /// The features of every searchable stored keyframe, by id (pointers into the detector, valid
   /// until it changes).
   std::unordered_map<std::int64_t, const FeatureSet*> storedFeatures() const;
