@@ -269,7 +269,7 @@ const LoopDetection* Backend::redundancyMatch(const Keyframe& keyframe,
     }
   }
   const CullRule rule = cullRule();
-  const LoopDetection* best = nullptr;
+  const LoopDetection* best = nullptr;  // the one that sees it best
   for (const LoopDetection* match : covering) {
     if (best == nullptr || match->num_inliers > best->num_inliers) best = match;
   }
@@ -284,11 +284,7 @@ const LoopDetection* Backend::redundancyMatch(const Keyframe& keyframe,
     return best;
   }
   if (!covered(keyframe.features, keyframe.intrinsics, T_view_keyframe, rule)) return nullptr;
-  // Merged into the one that sees it best.
-  return *std::max_element(covering.begin(), covering.end(),
-                           [](const LoopDetection* a, const LoopDetection* b) {
-                             return a->num_inliers < b->num_inliers;
-                           });
+  return best;  // merged into the one that sees it best
 }
 
 void Backend::cull(const Keyframe& keyframe, const LoopDetection& match, BackendUpdate& update) {
