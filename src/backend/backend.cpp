@@ -306,13 +306,10 @@ void Backend::cullCoveredEarlierKeyframes(const Keyframe& keyframe,
     seen.push_back(&match);
   }
   const CullRule rule = cullRule();
-  const std::int64_t gauge_id = graph_.nodeIds().front();
   for (const LoopDetection* match : seen) {
+    // The graph's first keyframe (the gauge) is a segment start too.
     const std::int64_t id = match->match_id;
-    if (!graph_.hasNode(id) || id == gauge_id || graph_.isFixed(id) ||
-        segment_starts_.count(id) != 0) {
-      continue;
-    }
+    if (graph_.isFixed(id) || segment_starts_.count(id) != 0) continue;
     const FeatureSet* features = detector_.features(id);
     const auto header = headers_.find(id);
     if (features == nullptr || header == headers_.end()) continue;

@@ -599,6 +599,26 @@ TEST(Backend, AfterEarlierKeyframesAreCulledEveryAnchorIsInTheGraphAndASnapshotR
   }
 }
 
+// The same view again: a keyframe whose features are nearly all inliers of one match is culled
+// into that keyframe even where the 3-view rule could not call it redundant.
+TEST(Backend, AKeyframeThatRepeatsAnEarlierViewIsCulledIntoIt) {
+  const RenderedKeyframes lap = renderKeyframes("room", 5, 40);
+  BackendConfig config;
+  config.cull_min_covering_keyframes = 50;  // the view rule never holds
+  config.cull_earlier_keyframes = false;
+  Backend backend(config, roomVocabulary());
+  const std::size_t n = 12;
+  for (std::size_t k = 0; k < n; ++k) EXPECT_FALSE(backend.addKeyframe(lap.keyframes[k]).culled);
+  // The camera comes back to keyframe 5's view (odometry puts it where keyframe 5 is).
+  auto again = std::make_shared<Keyframe>(*lap.keyframes[5]);
+  again->id = static_cast<std::int64_t>(n);
+  again->T_world_camera = backend.pose(lap.keyframes[5]->id);
+  const BackendUpdate update = backend.addKeyframe(again);
+  EXPECT_TRUE(update.culled);
+  EXPECT_EQ(update.culled_into_id, lap.keyframes[5]->id);
+  EXPECT_EQ(backend.graph().numNodes(), n);
+}
+
 // daemon.memory_limit_mb: near and over the limit the culling rule is relaxed, so fewer
 // keyframes are kept, and what the culled ones held stays in the map.
 TEST(Backend, UnderMemoryPressureFewerKeyframesAreKept) {
