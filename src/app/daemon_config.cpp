@@ -70,8 +70,8 @@ const ConfigSchema<DaemonConfig>& DaemonConfig::schema() {
                   "resident memory to stay under, checked with every status message; above 80% "
                   "new keyframes are culled harder and kept without images or map clouds, above "
                   "100% the kept clouds of older keyframes are released too (their map stays, "
-                  "but no longer follows corrections); reported on the status channel; 0 = no "
-                  "limit")
+                  "but no longer follows corrections) and the map far from the camera is made "
+                  "coarser (mapping.coarse_far_*); reported on the status channel; 0 = no limit")
           .number("opencv_threads", &C::opencv_threads, 0, 64, "threads",
                   "OpenCV's own worker threads; 0 runs every OpenCV call on the stage thread that "
                   "makes it (a hidden pool would compete with the stage threads)")

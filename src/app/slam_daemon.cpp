@@ -410,7 +410,8 @@ void SlamDaemon::Impl::publishStatus(LcmBus& bus, StatusBuilder& builder, Pipeli
     extras.message +=
         (extras.message.empty() ? "" : "; ") + std::string("memory ") +
         toString(memory_governor.level()) + " (" + std::to_string(static_cast<int>(resident_mb)) +
-        " of " + std::to_string(daemon.memory_limit_mb) + " MB): fewer keyframes and kept clouds";
+        " of " + std::to_string(daemon.memory_limit_mb) + " MB): fewer keyframes and kept clouds" +
+        (memory_governor.level() == MemoryPressure::kOver ? ", coarser map far away" : "");
   }
   if (not_localized) {
     extras.message += (extras.message.empty() ? "" : "; ") +
@@ -463,7 +464,8 @@ void SlamDaemon::Impl::updateMemoryPressure() {
                                : (now == MemoryPressure::kNear
                                       ? ", new keyframes culled harder and kept without images "
                                         "or clouds"
-                                      : ", and the kept clouds of older keyframes released"));
+                                      : ", the kept clouds of older keyframes released and "
+                                        "the map far from the camera made coarser"));
 }
 
 bool SlamDaemon::Impl::openSource() {
@@ -701,7 +703,10 @@ void SlamDaemon::Impl::summarize(const std::vector<StageStats>& stats,
   summary.frames_captured = processed("capture");
   summary.frames_tracked = processed("tracking");
   summary.poses_published = processed("publish");
-  if (mapper) summary.frames_mapped = static_cast<std::uint64_t>(mapper->stats().frames_integrated);
+  if (mapper) {
+    summary.frames_mapped = static_cast<std::uint64_t>(mapper->stats().frames_integrated);
+    summary.map_blocks_merged = mapper->stats().far_map_blocks_merged;
+  }
   for (const auto& stage : stats) {
     summary.errors += stage.errors;
     for (const auto& edge : stage.inputs) summary.drops += edge.dropped + edge.discarded;
@@ -950,6 +955,8 @@ bool SlamDaemon::Impl::writeMetrics(const std::vector<StageStats>& stats) {
     json.key("keyframes_moved").value(map_stats.keyframes_moved);
     json.key("keyframes_taken_out").value(map_stats.keyframes_taken_out);
     json.key("corrections_caught_up").value(map_stats.corrections_caught_up);
+    json.key("far_map_coarsenings").value(map_stats.far_map_coarsenings);
+    json.key("far_map_blocks_merged").value(map_stats.far_map_blocks_merged);
     json.endObject();
   }
   json.key("stages").beginObject();

@@ -445,6 +445,7 @@ void MappingStep::process(const EstimatedPacket& packet) {
       // The pipeline counts a thrown error against this stage and carries on.
       throw std::runtime_error("frame not mapped: " + result.error);
     }
+    coarsenFarMap(T_world_camera);
   }
   if (!awaiting_map_frame_) catchUp(cycle_start_ns);
   publishOutputs(mapper_.poll(mapper_.latestUtime()));
@@ -457,6 +458,27 @@ void MappingStep::process(const EstimatedPacket& packet) {
     occupied_voxels_.store(static_cast<std::int64_t>(counts.occupied), std::memory_order_relaxed);
     const std::int64_t walk_ns = steadyNowNs() - now_ns;
     next_voxel_count_ns_ = now_ns + std::max<std::int64_t>(1'000'000'000, 100 * walk_ns);
+  }
+}
+
+void MappingStep::coarsenFarMap(const SE3& T_world_camera) {
+  if (memory_pressure_ == nullptr ||
+      memory_pressure_->load(std::memory_order_relaxed) != MemoryPressure::kOver) {
+    return;
+  }
+  const std::int64_t now_ns = steadyNowNs();
+  if (now_ns < next_coarsening_ns_) return;
+  const CoarsenResult result = mapper_.coarsenFarMap(T_world_camera.translation());
+  // A walk of the whole tree: at most 1% of this thread's time, like the voxel counts.
+  next_coarsening_ns_ =
+      now_ns + std::max<std::int64_t>(kCoarseningPeriodNs,
+                                      static_cast<std::int64_t>(100.0 * result.seconds * 1e9));
+  if (result.blocks_merged > 0) {
+    SLAMD_LOG_INFO(kLog) << "memory over the limit: the map beyond "
+                         << mapper_.config().coarse_far_radius_m
+                         << " m of the camera made coarser: " << result.blocks_merged
+                         << " blocks merged, " << result.nodes_removed << " nodes freed in "
+                         << 1e3 * result.seconds << " ms";
   }
 }
 

@@ -97,6 +97,128 @@ void deleteVoxel(Tree& tree, const octomap::OcTreeKey& key) {
   }
 }
 
+/// Mapper::coarsenFarMap() on one tree: a depth-first walk that merges far blocks bottom-up, so
+/// that blocks merged at one level can merge again at the next.
+template <typename Tree>
+class FarMapCoarsener {
+ public:
+  using Node = typename Tree::NodeType;
+
+  FarMapCoarsener(Tree& tree, const Eigen::Vector3d& near_point_m, double near_radius_m, int levels,
+                  std::vector<Eigen::AlignedBox3d> kept_boxes)
+      : tree_(tree),
+        near_point_m_(near_point_m),
+        near_radius_m_(near_radius_m),
+        depth_max_(tree.getTreeDepth()),
+        first_merging_depth_(depth_max_ - static_cast<unsigned>(levels)),
+        kept_boxes_(std::move(kept_boxes)) {}
+
+  CoarsenResult run() {
+    Node* root = tree_.getRoot();
+    if (root == nullptr || first_merging_depth_ >= depth_max_) return result_;
+    const std::size_t nodes_before = tree_.size();
+    const octomap::key_type root_key_value = octomap::key_type{1} << (depth_max_ - 1);
+    visit(root, 0, octomap::OcTreeKey(root_key_value, root_key_value, root_key_value));
+    result_.nodes_removed = nodes_before - tree_.size();
+    return result_;
+  }
+
+ private:
+  void visit(Node* node, unsigned depth, const octomap::OcTreeKey& key) {
+    const double half_m = 0.5 * tree_.getNodeSize(depth);
+    const octomap::point3d c = tree_.keyToCoord(key, depth);
+    const Eigen::Vector3d centre(c.x(), c.y(), c.z());
+    const Eigen::Vector3d half = Eigen::Vector3d::Constant(half_m);
+    const Eigen::AlignedBox3d cube(centre - half, centre + half);
+    // Nothing in a cube wholly within the radius is far.
+    if (((centre - near_point_m_).cwiseAbs() + half).norm() <= near_radius_m_) return;
+    // Children below the finest level's parents have children of their own to visit.
+    for (unsigned i = 0; depth + 1 < depth_max_ && i < 8; ++i) {
+      if (!tree_.nodeChildExists(node, i)) continue;
+      Node* child = tree_.getNodeChild(node, i);
+      if (!tree_.nodeHasChildren(child)) continue;
+      const octomap::key_type child_offset = octomap::key_type{1} << (depth_max_ - 2 - depth);
+      octomap::OcTreeKey child_key;
+      octomap::computeChildKey(i, child_offset, key, child_key);
+      visit(child, depth + 1, child_key);
+    }
+    if (depth < first_merging_depth_ || cube.exteriorDistance(near_point_m_) <= near_radius_m_) {
+      return;
+    }
+    for (const Eigen::AlignedBox3d& box : kept_boxes_) {
+      if (box.intersects(cube)) return;
+    }
+    merge(node);
+  }
+
+  /// Merges the children of `node` (all leaves) into it, when the rule allows.
+  void merge(Node* node) {
+    int known = 0;
+    bool any_occupied = false;
+    float max_log_odds = -std::numeric_limits<float>::infinity();
+    int coloured = 0;
+    int colour_sum[3] = {0, 0, 0};
+    for (unsigned i = 0; i < 8; ++i) {
+      if (!tree_.nodeChildExists(node, i)) continue;
+      const Node* child = tree_.getNodeChild(node, i);
+      if (tree_.nodeHasChildren(child)) return;  // a finer part that did not merge stays fine
+      ++known;
+      max_log_odds = std::max(max_log_odds, child->getLogOdds());
+      const bool occupied = tree_.isNodeOccupied(child);
+      any_occupied = any_occupied || occupied;
+      if constexpr (std::is_same_v<Node, octomap::ColorOcTreeNode>) {
+        if (occupied && child->isColorSet()) {
+          const octomap::ColorOcTreeNode::Color colour = child->getColor();
+          colour_sum[0] += colour.r;
+          colour_sum[1] += colour.g;
+          colour_sum[2] += colour.b;
+          ++coloured;
+        }
+      }
+    }
+    // Free space is merged only where it was all seen: unknown never becomes free.
+    if (known == 0 || (!any_occupied && known < 8)) return;
+    for (unsigned i = 0; i < 8; ++i) {
+      Node* child = tree_.nodeChildExists(node, i) ? tree_.getNodeChild(node, i)
+                                                   : tree_.createNodeChild(node, i);
+      child->setLogOdds(max_log_odds);
+      if constexpr (std::is_same_v<Node, octomap::ColorOcTreeNode>) {
+        if (coloured > 0) {
+          child->setColor(static_cast<std::uint8_t>(colour_sum[0] / coloured),
+                          static_cast<std::uint8_t>(colour_sum[1] / coloured),
+                          static_cast<std::uint8_t>(colour_sum[2] / coloured));
+        } else {
+          child->setColor(255, 255, 255);  // OctoMap's "no colour"
+        }
+      }
+    }
+    // The children are now equal leaves: pruning frees them and their array.
+    if (tree_.pruneNode(node)) ++result_.blocks_merged;
+  }
+
+  Tree& tree_;
+  Eigen::Vector3d near_point_m_;
+  double near_radius_m_;
+  unsigned depth_max_;
+  unsigned first_merging_depth_;
+  std::vector<Eigen::AlignedBox3d> kept_boxes_;
+  CoarsenResult result_;
+};
+
+/// The box (map frame) that a cloud's rays from the camera reach at T_world_camera, rays cut at
+/// max_range_m as they go in, grown by margin_m.
+Eigen::AlignedBox3d reachOf(const PointCloud& cloud_camera, const SE3& T_world_camera,
+                            double max_range_m, double margin_m) {
+  Eigen::AlignedBox3d box(T_world_camera.translation());
+  for (const Eigen::Vector3f& p : cloud_camera.points) {
+    const Eigen::Vector3d ray = p.cast<double>();
+    const double range_m = ray.norm();
+    box.extend(T_world_camera * (range_m > max_range_m ? ray * (max_range_m / range_m) : ray));
+  }
+  const Eigen::Vector3d margin = Eigen::Vector3d::Constant(margin_m);
+  return Eigen::AlignedBox3d(box.min() - margin, box.max() + margin);
+}
+
 std::string extensionOf(const std::string& path) {
   return std::filesystem::path(path).extension().string();
 }
@@ -1165,6 +1287,34 @@ void Mapper::eraseKeyframe(std::map<std::int64_t, KeyframeCloud>::iterator it) {
   stats_.keyframe_cloud_bytes -= cloudBytes(it->second.cloud_camera);
   keyframes_.erase(it);
   stats_.keyframe_clouds = static_cast<std::int64_t>(keyframes_.size());
+}
+
+CoarsenResult Mapper::coarsenFarMap(const Eigen::Vector3d& near_point_m) {
+  const auto start = Clock::now();
+  CoarsenResult result;
+  if (config_.coarse_far_levels <= 0 || !near_point_m.allFinite()) return result;
+  // A voxel a ray touches lies within one voxel of the ray.
+  const double margin_m = resolution();
+  std::vector<Eigen::AlignedBox3d> kept_boxes;
+  for (const auto& entry : keyframes_) {
+    const KeyframeCloud& keyframe = entry.second;
+    if (keyframe.parts_in_map == 0) continue;
+    kept_boxes.push_back(reachOf(keyframe.cloud_camera, keyframe.T_world_camera_in_map,
+                                 config_.max_range_m, margin_m));
+  }
+  result = withTree([&](auto& tree) {
+    return FarMapCoarsener(tree, near_point_m, config_.coarse_far_radius_m,
+                           config_.coarse_far_levels, std::move(kept_boxes))
+        .run();
+  });
+  if (result.blocks_merged > 0) {
+    ++stats_.far_map_coarsenings;
+    stats_.far_map_blocks_merged += static_cast<std::int64_t>(result.blocks_merged);
+    inner_dirty_ = true;
+    requestResynchronisation();
+  }
+  result.seconds = secondsSince(start);
+  return result;
 }
 
 std::size_t Mapper::releaseKeyframeClouds(std::size_t keep_newest) {

@@ -111,7 +111,16 @@ const ConfigSchema<MappingConfig>& MappingConfig::schema() {
                   "or put in) at a time, at least one step when anything is left")
           .number("keyframe_step_points", &C::keyframe_step_points, 100, 10000000, "points",
                   "a kept keyframe cloud goes into the map, and moves, in parts of this many "
-                  "points (bands of the image), a step each");
+                  "points (bands of the image), a step each")
+          .number("coarse_far_radius_m", &C::coarse_far_radius_m, 0.0, 1000.0, "m",
+                  "over the memory limit, the map farther than this from the camera is made "
+                  "coarser (see coarse_far_levels); what the camera sees stays at full resolution "
+                  "when it exceeds max_range_m")
+          .number("coarse_far_levels", &C::coarse_far_levels, 0, 4, "levels",
+                  "over the memory limit, far voxels are merged up to this many OcTree levels (2 "
+                  "= blocks of 4x4x4 voxels): a block is occupied where any of its voxels was, "
+                  "free only where all were free, and left fine where free meets unknown; 0 = "
+                  "never");
   return table;
 }
 

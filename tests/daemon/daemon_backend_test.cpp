@@ -100,14 +100,16 @@ TEST_F(DaemonWithBackEnd, AfterTheLensIsCoveredTrackingResumesInTheSameMap) {
 }
 
 // daemon.memory_limit_mb far below what the run needs: the daemon degrades instead of failing.
-// It keeps fewer keyframes, keeps new ones without their alignment images, says so, and still
-// tracks every frame.
+// It keeps fewer keyframes, keeps new ones without their alignment images, makes the map far
+// from the camera coarser, says so, and still tracks every frame.
 TEST_F(DaemonWithBackEnd, AMemoryLimitBelowWhatTheRunNeedsMakesItKeepFewerKeyframes) {
   const RunResult normal = runRoomLap(true, "no_limit");
-  const RunResult limited = runRoomLap(true, "limited", {"daemon.memory_limit_mb=1"});
+  // A far map begins 1 m from the camera, so that the room has one.
+  const RunResult limited =
+      runRoomLap(true, "limited", {"daemon.memory_limit_mb=1", "mapping.coarse_far_radius_m=1"});
   std::printf(
       "room lap: %lld keyframes of %lld bytes each without a limit, %lld of %lld bytes under a "
-      "1 MB limit; ATE %.4f m / %.4f m\n",
+      "1 MB limit; ATE %.4f m / %.4f m; %lld map blocks merged far from the camera\n",
       static_cast<long long>(normal.summary.keyframes),
       static_cast<long long>(normal.summary.keyframes > 0
                                  ? normal.summary.keyframe_bytes / normal.summary.keyframes
@@ -116,8 +118,11 @@ TEST_F(DaemonWithBackEnd, AMemoryLimitBelowWhatTheRunNeedsMakesItKeepFewerKeyfra
       static_cast<long long>(limited.summary.keyframes > 0
                                  ? limited.summary.keyframe_bytes / limited.summary.keyframes
                                  : 0),
-      normal.ate_rmse_m, limited.ate_rmse_m);
+      normal.ate_rmse_m, limited.ate_rmse_m,
+      static_cast<long long>(limited.summary.map_blocks_merged));
   EXPECT_EQ(normal.summary.memory_pressure_raised, 0u);
+  EXPECT_EQ(normal.summary.map_blocks_merged, 0);
+  EXPECT_GT(limited.summary.map_blocks_merged, 0);
   EXPECT_GE(limited.summary.memory_pressure_raised, 1u);
   EXPECT_GT(limited.summary.peak_resident_mb, 1.0);
   EXPECT_EQ(limited.summary.poses_published, normal.summary.poses_published);

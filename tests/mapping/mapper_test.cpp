@@ -509,6 +509,158 @@ TEST(Mapper, UnderMemoryPressureCloudsAreNotKeptOrAreReleasedAndTheMapStaysTheSa
   EXPECT_EQ(normal.correctKeyframePoses({{1, moved}}).unknown_ids, 1u);
 }
 
+// daemon.memory_limit_mb, over the limit: the map far from the camera is made coarser. Along a
+// 21 m corridor mapped every metre, with a kept keyframe near its start (its reach, 2 to 6 m
+// along, stays fine) and the camera at its far end, sampled every 10 cm in and around the corridor
+// against the same map left fine.
+TEST(Mapper, OverTheMemoryLimitTheMapFarFromTheCameraIsMadeCoarser) {
+  BoxRoom corridor;
+  corridor.min_m = Eigen::Vector3d(-1.02, -1.22, -1.02);
+  corridor.max_m = Eigen::Vector3d(1.02, 1.02, 20.02);
+  const Eigen::Vector3d camera_m(0.0, 0.0, 19.0);
+  const Eigen::Vector3d kept_camera_m(0.0, 0.0, 2.0);
+  for (const bool color : {false, true}) {
+    SCOPED_TRACE(color ? "ColorOcTree" : "OcTree");
+    MappingConfig config = testConfig();
+    config.color = color;
+    config.pixel_stride = 4;
+    config.coarse_far_radius_m = 5.0;
+    config.coarse_far_levels = 2;
+    const auto build = [&](Mapper& mapper) {
+      Utime utime = 1'000'000;
+      for (int z = 0; z <= 19; ++z) {
+        for (const double yaw : {0.0, M_PI}) {
+          SE3 T = SE3::Identity();
+          T.linear() = Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitY()).toRotationMatrix();
+          T.translation() = Eigen::Vector3d(0.0, 0.0, z);
+          RgbdFrame frame = corridor.render(T);
+          frame.utime = utime += 33'333;
+          if (T.translation() == kept_camera_m && yaw == 0.0) {
+            mapper.addKeyframe(frame, T, 1);
+          } else {
+            ASSERT_EQ(mapper.integrate(frame, T).status, IntegrationStatus::kOk);
+          }
+        }
+      }
+      mapper.catchUp(std::numeric_limits<double>::infinity());
+    };
+    Mapper fine(config);
+    Mapper coarse(config);
+    build(fine);
+    build(coarse);
+    ASSERT_EQ(coarse.keptKeyframeIds(), (std::vector<std::int64_t>{1}));
+    const std::size_t nodes_before =
+        coarse.ocTree() ? coarse.ocTree()->size() : coarse.colorOcTree()->size();
+    const std::size_t bytes_before = coarse.memoryBytes();
+    const std::int64_t sequence_before = coarse.nextUpdateSequence();
+
+    const CoarsenResult result = coarse.coarsenFarMap(camera_m);
+    const std::size_t nodes_after =
+        coarse.ocTree() ? coarse.ocTree()->size() : coarse.colorOcTree()->size();
+    EXPECT_GT(result.blocks_merged, 0u);
+    EXPECT_EQ(result.nodes_removed, nodes_before - nodes_after);
+    EXPECT_LT(nodes_after, nodes_before * 2 / 3) << "of " << nodes_before << " nodes";
+    EXPECT_LT(coarse.memoryBytes(), bytes_before);
+    EXPECT_EQ(coarse.stats().far_map_coarsenings, 1);
+    EXPECT_EQ(coarse.stats().far_map_blocks_merged,
+              static_cast<std::int64_t>(result.blocks_merged));
+    // Updates cannot say that voxels merged: subscribers resynchronise from a full map.
+    EXPECT_TRUE(coarse.fullMapRequested());
+    EXPECT_GT(coarse.nextUpdateSequence(), sequence_before);
+    // Everything far was merged at once: a second call finds nothing more.
+    EXPECT_EQ(coarse.coarsenFarMap(camera_m).blocks_merged, 0u);
+    std::printf(
+        "corridor map (%s): %zu -> %zu nodes, %zu -> %zu bytes, %zu blocks merged in "
+        "%.1f ms\n",
+        color ? "colour" : "no colour", nodes_before, nodes_after, bytes_before,
+        coarse.memoryBytes(), result.blocks_merged, 1e3 * result.seconds);
+
+    // Merged blocks of 4x4x4 voxels exist, and merged occupied ones keep a colour.
+    const double resolution = config.resolution_m;
+    std::size_t coarse_leaves = 0;
+    std::size_t coarse_coloured = 0;
+    if (color) {
+      const octomap::ColorOcTree& tree = *coarse.colorOcTree();
+      for (auto it = tree.begin_leafs(); it != tree.end_leafs(); ++it) {
+        if (it.getSize() < 3.5 * resolution || !tree.isNodeOccupied(*it)) continue;
+        ++coarse_leaves;
+        if (it->isColorSet()) ++coarse_coloured;
+      }
+      EXPECT_EQ(coarse_coloured, coarse_leaves);
+    } else {
+      const octomap::OcTree& tree = *coarse.ocTree();
+      for (auto it = tree.begin_leafs(); it != tree.end_leafs(); ++it) {
+        if (it.getSize() > 3.5 * resolution && tree.isNodeOccupied(*it)) ++coarse_leaves;
+      }
+    }
+    EXPECT_GT(coarse_leaves, 0u);
+
+    // Sampled at voxel centres every 10 cm: occupied stays occupied, known stays known, unknown
+    // never becomes free; near the camera and where the kept keyframe's rays went, nothing
+    // changed.
+    const auto log_odds_at = [](Mapper& mapper, const Eigen::Vector3d& p) {
+      const auto search = [&p](const auto& tree) -> std::optional<float> {
+        const auto* node = tree.search(p.x(), p.y(), p.z());
+        if (node == nullptr) return std::nullopt;
+        return node->getLogOdds();
+      };
+      return mapper.ocTree() ? search(*mapper.ocTree()) : search(*mapper.colorOcTree());
+    };
+    std::size_t samples = 0;
+    std::size_t lost_occupied = 0;
+    std::size_t lost_known = 0;
+    std::size_t unknown_made_free = 0;
+    std::size_t near_changed = 0;
+    std::size_t kept_changed = 0;
+    std::size_t far_changed = 0;
+    const double step = 2.0 * resolution;
+    for (double x = -1.325; x < 1.3; x += step) {
+      for (double y = -1.525; y < 1.3; y += step) {
+        for (double z = -1.325; z < 20.3; z += step) {
+          const Eigen::Vector3d p(x, y, z);
+          const int before = fine.occupancyAt(p);
+          const int after = coarse.occupancyAt(p);
+          ++samples;
+          if (before == 1 && after != 1) ++lost_occupied;
+          if (before != -1 && after == -1) ++lost_known;
+          if (before == -1 && after == 0) ++unknown_made_free;
+          const bool near = (p - camera_m).norm() < config.coarse_far_radius_m;
+          const bool in_kept_reach = z > 1.9 && z < 6.1;
+          if (log_odds_at(fine, p) != log_odds_at(coarse, p)) {
+            if (near) {
+              ++near_changed;
+            } else if (in_kept_reach) {
+              ++kept_changed;
+            } else {
+              ++far_changed;
+            }
+          }
+        }
+      }
+    }
+    EXPECT_EQ(lost_occupied, 0u) << "of " << samples;
+    EXPECT_EQ(lost_known, 0u);
+    EXPECT_EQ(unknown_made_free, 0u);
+    EXPECT_EQ(near_changed, 0u);
+    EXPECT_EQ(kept_changed, 0u);
+    EXPECT_GT(far_changed, 0u);
+
+    // The kept keyframe still comes out exactly: its reach is what the fine map's is without it.
+    fine.forgetKeyframe(1);
+    coarse.forgetKeyframe(1);
+    std::size_t taken_out_differs = 0;
+    for (double x = -1.325; x < 1.3; x += step) {
+      for (double y = -1.525; y < 1.3; y += step) {
+        for (double z = 1.925; z < 6.1; z += step) {
+          const Eigen::Vector3d p(x, y, z);
+          if (log_odds_at(fine, p) != log_odds_at(coarse, p)) ++taken_out_differs;
+        }
+      }
+    }
+    EXPECT_EQ(taken_out_differs, 0u);
+  }
+}
+
 TEST(Mapper, KeyframesForgottenInStepsGoFirstAndLeaveNothingBehind) {
   const BoxRoom room;
   const MappingConfig config = testConfig();

@@ -100,6 +100,7 @@ struct DaemonSummary {
   // how many times the pressure level went up.
   double peak_resident_mb = 0.0;
   std::uint64_t memory_pressure_raised = 0;
+  std::int64_t map_blocks_merged = 0;  ///< far map made coarser over the limit (Mapper stats)
   double duration_s = 0.0;
   double end_to_end_p50_ms = 0.0;
   double end_to_end_p95_ms = 0.0;

@@ -411,11 +411,13 @@ class MappingStep : public StepBase {
   MappingStepStats stats() const;
   /// The level the mapper degrades by (read every cycle; set by the control thread). Under
   /// kOver, the kept clouds of all but the newest kKeptCloudsOverTheLimit keyframes are
-  /// released.
+  /// released, and the map far from the camera is made coarser (Mapper::coarsenFarMap) every
+  /// kCoarseningPeriodNs at most.
   void watchMemoryPressure(const std::atomic<MemoryPressure>* pressure) {
     memory_pressure_ = pressure;
   }
   static constexpr std::size_t kKeptCloudsOverTheLimit = 20;
+  static constexpr std::int64_t kCoarseningPeriodNs = 5'000'000'000;
 
  private:
   void applyCorrections();
@@ -423,6 +425,8 @@ class MappingStep : public StepBase {
   /// Forgets the kept clouds of keyframes a correction no longer lists (culled by the back end).
   void forgetCulledKeyframes(const std::vector<std::pair<std::int64_t, SE3>>& keyframe_poses);
   void publishOutputs(const MapperOutputs& outputs);
+  /// Under kOver: makes the map far from the camera (T_world_camera) coarser, when due.
+  void coarsenFarMap(const SE3& T_world_camera);
 
   Mapper& mapper_;
   bool keyframes_only_;
@@ -431,6 +435,7 @@ class MappingStep : public StepBase {
   EpochInbox<MapCorrection> corrections_;
   SpscQueue<MapRequest>* requests_;
   std::int64_t next_voxel_count_ns_ = 0;
+  std::int64_t next_coarsening_ns_ = 0;
   /// The back end's correction: uncorrected (filter) world -> corrected world.
   SE3 T_world_uncorrected_ = SE3::Identity();
   bool snapshot_failing_ = false;    ///< the last periodic snapshot failed

@@ -7,8 +7,9 @@
 //     keeps no new keyframe clouds (new keyframes go into the map at once and no longer follow
 //     corrections).
 //   kOver (above the limit): also what is held is released. The mapper drops the kept clouds of
-//     all but its newest keyframes (their part of the map stays where it is); the back end culls
-//     a new keyframe that one other keyframe already covers.
+//     all but its newest keyframes (their part of the map stays where it is) and makes the map
+//     far from the camera coarser; the back end culls a new keyframe that one other keyframe
+//     already covers.
 // The thresholds have hysteresis (down again below 75% and 95%), so a level does not flap.
 //
 // MemoryGovernor is owned by the thread that publishes status; the stages read its level

@@ -119,6 +119,8 @@ struct MapperStats {
   std::int64_t keyframes_moved = 0;        ///< contributions moved to corrected poses
   std::int64_t keyframes_taken_out = 0;    ///< contributions removed (forgotten keyframes)
   std::int64_t corrections_caught_up = 0;  ///< times every queued keyframe had been moved
+  std::int64_t far_map_coarsenings = 0;    ///< coarsenFarMap() calls that merged anything
+  std::int64_t far_map_blocks_merged = 0;  ///< blocks of 8 voxels merged into one, summed
 };
 
 /// Result of a save or load.
@@ -146,6 +148,13 @@ struct VoxelCounts {
 struct KeyframeCorrectionResult {
   std::size_t keyframes_to_move = 0;  ///< queued: some point would move by over half a voxel
   std::size_t unknown_ids = 0;        ///< ids in the request without a kept cloud, or bad poses
+};
+
+/// Result of coarsenFarMap().
+struct CoarsenResult {
+  std::size_t blocks_merged = 0;  ///< nodes whose 8 children became one voxel of their size
+  std::size_t nodes_removed = 0;  ///< OcTree nodes freed
+  double seconds = 0.0;
 };
 
 /// Result of catchUp().
@@ -256,6 +265,17 @@ class Mapper {
   /// Memory pressure (common/memory_pressure.hpp): from kNear on, new keyframe clouds are not
   /// kept (they go in at once, as when the cloud budget refuses them).
   void setMemoryPressure(MemoryPressure pressure) { memory_pressure_ = pressure; }
+  /// Makes the map coarser away from `near_point_m` (map frame, metres; the camera), to save
+  /// memory (OcTree nodes) under memory pressure. In every block of 2x2x2 voxels, up to
+  /// config.coarse_far_levels levels up from the finest, that lies wholly farther than
+  /// config.coarse_far_radius_m from the point, the 8 voxels become one of the block's size:
+  /// occupied (the largest log-odds, the average colour) when any of them was occupied, free
+  /// when all 8 were known and free; a block where free voxels meet unknown ones stays as it is,
+  /// so that no unknown space becomes free. Blocks that a kept keyframe's rays reached at the
+  /// pose it is in the map at are left alone, so that taking it out stays exact. Later
+  /// measurements refine a merged block again (OctoMap expands it). Subscribers resynchronise
+  /// from the next full map.
+  CoarsenResult coarsenFarMap(const Eigen::Vector3d& near_point_m);
   /// Drops the kept clouds of all but the newest `keep_newest` keyframes (oldest first; only
   /// clouds wholly in the map with nothing queued). Their part of the map stays, but no later
   /// correction can move or take it out. Returns how many were dropped.

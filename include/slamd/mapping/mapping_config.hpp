@@ -70,6 +70,10 @@ struct MappingConfig {
   double keyframe_step_budget_ms = 20.0;
   int keyframe_step_points = 4000;
 
+  // --- degrading under memory pressure (daemon.memory_limit_mb) ------------------------------
+  double coarse_far_radius_m = 6.0;
+  int coarse_far_levels = 2;
+
   /// The `mapping.*` keys.
   static const ConfigSchema<MappingConfig>& schema();
   /// Reads `mapping.*`; throws ConfigError.
