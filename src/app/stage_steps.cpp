@@ -447,11 +447,10 @@ void MappingStep::process(const EstimatedPacket& packet) {
     }
     coarsenFarMap(T_world_camera);
   }
-  if (!awaiting_map_frame_) catchUp(cycle_start_ns);
   publishOutputs(mapper_.poll(mapper_.latestUtime()));
   // Counting voxels walks the whole tree (tens of milliseconds for millions of voxels): once a
   // second is plenty for the status channel, and no more often than keeps the walks under 1% of
-  // this thread's time, so that they never make its p99.
+  // this thread's time.
   if (const std::int64_t now_ns = steadyNowNs(); now_ns >= next_voxel_count_ns_) {
     const VoxelCounts counts = mapper_.countVoxels();
     leaf_voxels_.store(static_cast<std::int64_t>(counts.leaves), std::memory_order_relaxed);
@@ -459,6 +458,10 @@ void MappingStep::process(const EstimatedPacket& packet) {
     const std::int64_t walk_ns = steadyNowNs() - now_ns;
     next_voxel_count_ns_ = now_ns + std::max<std::int64_t>(1'000'000'000, 100 * walk_ns);
   }
+  // Last, in what the frame's budget has left after everything else this cycle did (a full map,
+  // a voxel count, a coarsening), so that those walks do not come on top of a whole budget's
+  // steps: the cycle's time stays near the budget. Its changes go out with the next update.
+  if (!awaiting_map_frame_) catchUp(cycle_start_ns);
 }
 
 void MappingStep::coarsenFarMap(const SE3& T_world_camera) {
