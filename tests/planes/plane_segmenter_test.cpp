@@ -20,6 +20,7 @@
 #include "slamd/common/trajectory.hpp"
 #include "slamd/synth/synthetic_source.hpp"
 #include "test_data.hpp"
+#include "tum_frames.hpp"
 
 namespace slamd::planes {
 namespace {
@@ -464,48 +465,10 @@ TEST(PlaneSegmenter, FindsTheLargeSurfacesOfKinectModelFramesWithinLooserBounds)
 // ---------------------------------------------------------------------------------------------
 // Real data: TUM RGB-D fr1/xyz (a desk with a keyboard, monitors and papers, Kinect v1).
 
-struct TumFrame {
-  RgbdFrame frame;
-  SE3 T_world_camera = SE3::Identity();  ///< ground truth nearest in time (motion capture)
-};
-
-/// The first colour frame with the depth image and ground-truth pose nearest in time.
-std::optional<TumFrame> loadFirstTumFrame(const std::filesystem::path& dir) {
-  const TumFileList rgb = readTumFileList((dir / "rgb.txt").string());
-  const TumFileList depth = readTumFileList((dir / "depth.txt").string());
-  const Trajectory gt = readTumTrajectory((dir / "groundtruth.txt").string());
-  if (rgb.entries.empty() || depth.entries.empty() || gt.empty()) return std::nullopt;
-  const double t = rgb.entries.front().timestamp_s;
-  auto nearest = [t](const auto& items, auto time_of) {
-    std::size_t best = 0;
-    for (std::size_t i = 1; i < items.size(); ++i) {
-      if (std::abs(time_of(items[i]) - t) < std::abs(time_of(items[best]) - t)) best = i;
-    }
-    return best;
-  };
-  const auto& depth_entry =
-      depth.entries[nearest(depth.entries, [](const TumListEntry& e) { return e.timestamp_s; })];
-  TumFrame out;
-  out.T_world_camera =
-      gt[nearest(gt, [](const StampedPose& p) { return p.timestamp_s; })].T_world_camera;
-  out.frame.color_bgr = cv::imread((dir / rgb.entries.front().path).string(), cv::IMREAD_COLOR);
-  const cv::Mat raw = cv::imread((dir / depth_entry.path).string(), cv::IMREAD_UNCHANGED);
-  if (out.frame.color_bgr.empty() || raw.empty()) return std::nullopt;
-  out.frame.depth_m = depthRawToMeters(raw, 5000.0);  // the dataset's depth scale
-  // The dataset's published fr1 intrinsics (distortion ignored).
-  out.frame.intrinsics.fx = 517.3;
-  out.frame.intrinsics.fy = 516.5;
-  out.frame.intrinsics.cx = 318.6;
-  out.frame.intrinsics.cy = 255.3;
-  out.frame.intrinsics.width = out.frame.color_bgr.cols;
-  out.frame.intrinsics.height = out.frame.color_bgr.rows;
-  return out;
-}
-
 TEST(PlaneSegmenter, FindsTheDeskTopOfTumFr1XyzAsAHorizontalPlane) {
   const auto dir = test::findDataset("tum_fr1_xyz");
   if (!dir) GTEST_SKIP() << test::missingDataMessage("tum_fr1_xyz");
-  const std::optional<TumFrame> tum = loadFirstTumFrame(*dir);
+  const std::optional<test::TumFrame> tum = test::loadTumFrame(*dir, 0);
   ASSERT_TRUE(tum.has_value()) << "could not read the first frame of " << dir->string();
   // The motion-capture world frame of the TUM benchmark has z up (against gravity).
   const Eigen::Vector3d up_camera =
