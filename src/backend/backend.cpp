@@ -589,6 +589,14 @@ BackendSnapshot Backend::snapshot() const {
             [](const KeyframeRecord& a, const KeyframeRecord& b) { return a.id < b.id; });
   snapshot.segment_parents.assign(segment_parent_.begin(), segment_parent_.end());
   std::sort(snapshot.segment_parents.begin(), snapshot.segment_parents.end());
+  for (const auto& [id, views] : coverers_) {
+    for (const std::int64_t view : views) {
+      if (id < view && graph_.hasNode(id) && graph_.hasNode(view)) {
+        snapshot.views.emplace_back(id, view);
+      }
+    }
+  }
+  std::sort(snapshot.views.begin(), snapshot.views.end());
   snapshot.first_segment = first_segment_;
   snapshot.next_keyframe_id = next_keyframe_id_;
   snapshot.next_segment = next_segment_;
@@ -650,6 +658,13 @@ void Backend::restore(const BackendSnapshot& snapshot, bool fix_loaded_keyframes
   }
   for (const auto& entry : segment_first_id) segment_starts_.insert(entry.second);
   for (const auto& [segment, parent] : snapshot.segment_parents) segment_parent_[segment] = parent;
+  for (const auto& [a, b] : snapshot.views) {
+    if (!graph_.hasNode(a) || !graph_.hasNode(b) || a == b) {
+      throw std::invalid_argument("Backend::restore: view " + std::to_string(a) + " - " +
+                                  std::to_string(b) + " does not join two keyframes");
+    }
+    addCoverer(a, b);
+  }
   first_segment_ = snapshot.first_segment;
   segment_parent_.emplace(first_segment_, first_segment_);
   next_keyframe_id_ = snapshot.next_keyframe_id;

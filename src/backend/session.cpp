@@ -45,6 +45,7 @@ constexpr std::uint64_t kEdgeBytes = 8 + 8 + kPoseBytes + kInformationBytes + 1;
 constexpr std::uint64_t kCulledBytes = 8 + 8 + kPoseBytes + kInformationBytes;
 constexpr std::uint64_t kRecordBytes = 8 + 8 + 8;
 constexpr std::uint64_t kSegmentParentBytes = 8 + 8;
+constexpr std::uint64_t kViewBytes = 8 + 8;
 // The fixed part of a keyframe: ids and times, pose, intrinsics, median depth, num_with_depth,
 // and the six counts or sizes that follow (keypoints, descriptor rows/cols/type, pixels, points,
 // scale, gradients).
@@ -102,12 +103,15 @@ class SessionReader : public LittleEndianReader {
       fail("bad magic (not written by slamd's session writer)");
     }
     setWhere("header");
-    const std::uint32_t version = u32();
-    if (version != kSessionFormatVersion) {
-      fail("format version " + std::to_string(version) + ", this slamd reads " +
+    version_ = u32();
+    if (version_ < kSessionOldestReadableVersion || version_ > kSessionFormatVersion) {
+      fail("format version " + std::to_string(version_) + ", this slamd reads " +
+           std::to_string(kSessionOldestReadableVersion) + " to " +
            std::to_string(kSessionFormatVersion));
     }
   }
+  /// The file's format version (after header()).
+  std::uint32_t version() const { return version_; }
   void expectEnd() const {
     if (remaining() != 0) {
       fail(std::to_string(remaining()) + " unexpected bytes after the last record");
@@ -116,6 +120,7 @@ class SessionReader : public LittleEndianReader {
 
  private:
   std::string path_;
+  std::uint32_t version_ = 0;
 };
 
 /// Parses `bytes`, the file at `path`, with `parse(SessionReader&)`.
@@ -364,6 +369,16 @@ SnapshotProblem snapshotProblem(const BackendSnapshot& s) {
   for (const auto& link : s.segment_parents) child_segments.push_back(link.first);
   if (const std::int64_t segment = firstOnCycle(parent_of, child_segments); segment >= 0) {
     return graphFile("segment " + std::to_string(segment) + ": its parents form a cycle");
+  }
+
+  std::set<std::pair<std::int64_t, std::int64_t>> views;
+  for (const auto& [a, b] : s.views) {
+    const std::string name = "view " + std::to_string(a) + " - " + std::to_string(b);
+    if (node_ids.count(a) == 0 || node_ids.count(b) == 0) {
+      return graphFile(name + ": not two keyframes of the graph");
+    }
+    if (a >= b) return graphFile(name + ": not lower id first");
+    if (!views.emplace(a, b).second) return graphFile(name + " twice");
   }
 
   if (s.first_segment < 0) return graphFile("negative first segment");
@@ -634,6 +649,11 @@ std::string graphBytes(const BackendSnapshot& s) {
     out.i64(segment);
     out.i64(parent);
   }
+  out.u64(s.views.size());
+  for (const auto& [a, b] : s.views) {
+    out.i64(a);
+    out.i64(b);
+  }
   return bytes;
 }
 
@@ -691,6 +711,14 @@ void readGraph(SessionReader& in, BackendSnapshot& s) {
   for (auto& [segment, parent] : s.segment_parents) {
     segment = in.i64();
     parent = in.i64();
+  }
+  if (in.version() >= 2) {
+    const std::uint64_t num_views = recordCount(in, "view", kViewBytes);
+    s.views.resize(static_cast<std::size_t>(num_views));
+    for (auto& [a, b] : s.views) {
+      a = in.i64();
+      b = in.i64();
+    }
   }
   in.expectEnd();
 }

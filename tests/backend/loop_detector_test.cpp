@@ -597,6 +597,10 @@ TEST(Backend, AfterEarlierKeyframesAreCulledEveryAnchorIsInTheGraphAndASnapshotR
                   .norm(),
               1e-9);
   }
+  // The views the culling counts come back too, so that a loaded map's keyframes can be culled
+  // as they would have been had the run gone on.
+  EXPECT_FALSE(snapshot.views.empty());
+  EXPECT_EQ(restored.snapshot().views, snapshot.views);
 }
 
 // The same view again: a keyframe whose features are nearly all inliers of one match is culled

@@ -5,6 +5,7 @@
 #include "slamd/backend/session.hpp"
 
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -126,6 +127,7 @@ BackendSnapshot syntheticSnapshot(int num_features = 24) {
     s.records.push_back({id, id < 4 ? 0 : 1, 0.125 * static_cast<double>(id)});
   }
   s.segment_parents = {{1, 0}, {0, 0}};
+  s.views = {{0, 1}, {0, 2}, {2, 5}};
   s.first_segment = 0;
   s.next_keyframe_id = 7;
   s.next_segment = 2;
@@ -302,6 +304,7 @@ void expectSameSnapshot(const BackendSnapshot& a, const BackendSnapshot& b) {
     EXPECT_EQ(a.records[i].path_length_m, b.records[i].path_length_m);
   }
   EXPECT_EQ(a.segment_parents, b.segment_parents);
+  EXPECT_EQ(a.views, b.views);
   EXPECT_EQ(a.first_segment, b.first_segment);
   EXPECT_EQ(a.next_keyframe_id, b.next_keyframe_id);
   EXPECT_EQ(a.next_segment, b.next_segment);
@@ -567,6 +570,43 @@ TEST(Session, ASessionOfAnOlderFormatOrAForeignManifestIsRefused) {
       << loadError(dir);
 }
 
+// Format 1 (before the views were saved) still loads, without views. Made from a format-2 save:
+// the same layout except the views at the end of graph.bin.
+TEST(Session, ASessionOfFormatOneLoadsWithoutViews) {
+  const test::ScopedTempDir dir("session");
+  const BackendSnapshot snapshot = syntheticSnapshot();
+  const std::string generation = saveSession(dir, snapshot);
+  const fs::path folder = dir / generation;
+  std::string manifest = readText(folder / kSessionManifestFile);
+  for (const char* name : {kSessionKeyframesFile, kSessionGraphFile}) {
+    std::string bytes = readText(folder / name);
+    const std::uint32_t version = 1;
+    std::memcpy(&bytes[8], &version, sizeof(version));  // after the magic; little-endian host
+    if (std::string(name) == kSessionGraphFile) {
+      bytes.resize(bytes.size() - 8 - 16 * snapshot.views.size());
+    }
+    writeBytes(folder / name, bytes);
+    // Its manifest line: file <name> <bytes> <fnv1a64>.
+    const std::string key = std::string("file ") + name + " ";
+    const std::size_t start = manifest.find(key);
+    ASSERT_NE(start, std::string::npos);
+    const std::size_t end = manifest.find('\n', start);
+    char hex[17];
+    std::snprintf(hex, sizeof(hex), "%016llx",
+                  static_cast<unsigned long long>(fnv1a64(bytes.data(), bytes.size())));
+    manifest.replace(start, end - start, key + std::to_string(bytes.size()) + " " + hex);
+  }
+  writeBytes(folder / kSessionManifestFile, manifest);
+  rewriteManifestVersion(folder / kSessionManifestFile, "slamd-session 1");
+
+  const Session session = loadSession(dir.string());
+  EXPECT_EQ(session.info.format_version, 1u);
+  EXPECT_TRUE(session.backend.views.empty());
+  BackendSnapshot without_views = snapshot;
+  without_views.views.clear();
+  expectSameSnapshot(without_views, session.backend);
+}
+
 // A key this slamd does not know (information a later slamd of the same format added) is skipped.
 TEST(Session, AManifestLineWithAnUnknownKeyIsSkipped) {
   const test::ScopedTempDir dir("session");
@@ -714,6 +754,17 @@ TEST(SessionWriter, RefusesAnInconsistentSnapshotAndSavesNothing) {
        "next keyframe id 6"},
       {"next segment reused", [](BackendSnapshot& s) { s.next_segment = 1; }, "next segment 1"},
       {"record of nothing", [](BackendSnapshot& s) { s.records[2].id = 77; }, "no such keyframe"},
+      {"view of a culled keyframe",
+       [](BackendSnapshot& s) {
+         s.views[1] = {2, 3};
+       },
+       "view 2 - 3: not two keyframes of the graph"},
+      {"view higher id first",
+       [](BackendSnapshot& s) {
+         s.views[1] = {2, 0};
+       },
+       "not lower id first"},
+      {"view twice", [](BackendSnapshot& s) { s.views[1] = s.views[0]; }, "view 0 - 1 twice"},
       {"pose not finite",
        [](BackendSnapshot& s) {
          s.nodes[1].T_world_camera.translation().x() = std::numeric_limits<double>::infinity();

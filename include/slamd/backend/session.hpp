@@ -33,6 +33,8 @@
 //   Keyframe records: id, segment, utime, frame_sequence, pose, intrinsics, median depth,
 //   num_with_depth, keypoints, descriptors (rows, cols, OpenCV type, the elements), pixels,
 //   points (NaN = no depth), scales, inverse-depth gradients.
+//   Version 2 adds, last in graph.bin, the keyframe pairs that saw each other (views); a
+//   version 1 session loads without them.
 // Every count is checked against the bytes that remain before anything is allocated.
 //
 // A snapshot is consistent (SessionWriter refuses to save, and a reader to load, one that is not)
@@ -41,6 +43,7 @@
 // a known kind; a culled keyframe is not a node and its anchor is a node or another culled
 // keyframe whose chain of anchors ends at a node; a record names a keyframe or culled keyframe;
 // segment_parents names each segment once and has no cycle (a segment may be its own parent);
+// a view joins two different nodes, lower id first, and appears once;
 // next_keyframe_id is above every keyframe id and next_segment above every segment; per keyframe
 // the pixels and points have one entry per keypoint, descriptors one row per keypoint (or none),
 // scale and inverse_depth_gradient one entry per keypoint or none, the intrinsics are valid
@@ -78,7 +81,7 @@ namespace slamd {
 
 /// Version of the session layout and of keyframes.bin / graph.bin. A reader refuses a session
 /// with a newer version (made by a newer slamd) and one older than it can read.
-inline constexpr std::uint32_t kSessionFormatVersion = 1;
+inline constexpr std::uint32_t kSessionFormatVersion = 2;
 /// The oldest version this slamd reads.
 inline constexpr std::uint32_t kSessionOldestReadableVersion = 1;
 
@@ -127,6 +130,9 @@ struct BackendSnapshot {
   std::vector<KeyframeRecord> records;
   /// Joined tracking segments (union-find parent links: segment -> parent).
   std::vector<std::pair<std::int64_t, std::int64_t>> segment_parents;
+  /// Pairs of keyframes (graph nodes, lower id first, each pair once) that a verified match
+  /// showed seeing each other: the views the culling of earlier keyframes counts.
+  std::vector<std::pair<std::int64_t, std::int64_t>> views;
   std::int64_t first_segment = 0;     ///< the segment whose map every other joins
   std::int64_t next_keyframe_id = 0;  ///< one above every keyframe id used
   std::int64_t next_segment = 0;      ///< one above every segment used
