@@ -19,7 +19,15 @@
 //   pipeline); variant 2 = point-to-plane ICP on the whole cloud.
 //   Counters: p50_ms / p95_ms CPU time, err_mm / err_deg against the true motion, ok,
 //   free_dirs (degenerate directions), points (source points used), iterations.
+//
+// BM_PlaneOdometryCorridor/<doors>: plane ICP frame to frame along the plain synthetic corridor
+// (see the function). Counters: p50_ms / p95_ms (segmentation + registration per frame), failed
+// registrations, frames with one free direction along the corridor / none / other, the
+// per-frame error in the measured directions (err_p50/p95_mm, err_p50/p95/max_deg), and after 300
+// frames the chained estimate's rotation error (end_rot_deg) and offset across the corridor
+// (end_across_m).
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
@@ -145,6 +153,88 @@ void BM_Register(benchmark::State& state) {
   state.counters["iterations"] = static_cast<double>(result.iterations);
 }
 BENCHMARK(BM_Register)->ArgsProduct({{0, 1, 2}, {1, 10}, {0, 1, 2}})->Unit(benchmark::kMillisecond);
+
+/// BM_PlaneOdometryCorridor/<doors>: plane ICP from frame to frame along slamd's plain corridor
+/// (texture density 0.04; doors off / on; Kinect v1 model), frames 0-299 (10 s, about 8 m).
+/// Each pair starts from the true motion, so the estimate moves only where the planes measure;
+/// the chained estimates show how those directions drift. What issue 23's corridor mode would
+/// get from planes, before any fusion.
+void BM_PlaneOdometryCorridor(benchmark::State& state) {
+  const bool doors = state.range(0) == 1;
+  slamd::Config config;
+  config.applyOverride("synthetic.texture_density=0.04");
+  config.applyOverride(std::string("synthetic.doors=") + (doors ? "true" : "false"));
+  const slamd::SyntheticSource source("corridor", slamd::SyntheticConfig::load(config));
+  const slamd::Trajectory truth = *source.groundTruth();
+  constexpr int kFrames = 300;
+  state.SetLabel(doors ? "plain corridor with doors" : "plain corridor without doors");
+  const Eigen::Vector3d axis_world =
+      (truth[kFrames - 1].T_world_camera.translation() - truth[0].T_world_camera.translation())
+          .normalized();
+  for (auto _ : state) {
+    slamd::planes::PlaneSegmenter segmenters[2];
+    const slamd::planes::PlaneSegmentation* previous =
+        &segmenters[0].segment(*source.renderFrame(0));
+    slamd::SE3 T_world_estimate = truth[0].T_world_camera;
+    std::vector<double> frame_ms;
+    std::vector<double> error_mm;
+    std::vector<double> error_deg;
+    int failed = 0;
+    int one_free_along = 0;
+    int none_free = 0;
+    int other_free = 0;
+    for (int k = 1; k < kFrames; ++k) {
+      const slamd::RgbdFramePtr frame = source.renderFrame(k);
+      const slamd::SE3& T_world_k = truth[static_cast<std::size_t>(k)].T_world_camera;
+      const slamd::SE3 T_true =
+          truth[static_cast<std::size_t>(k - 1)].T_world_camera.inverse() * T_world_k;
+      const double start_ms = slamd::threadCpuMs();
+      const slamd::planes::PlaneSegmentation& current = segmenters[k % 2].segment(*frame);
+      const slamd::planes::IcpResult result =
+          slamd::planes::registerPlanes(current, *previous, frame->intrinsics, T_true);
+      frame_ms.push_back(slamd::threadCpuMs() - start_ms);
+      previous = &current;
+      if (!result.ok) {
+        ++failed;
+        T_world_estimate = T_world_estimate * T_true;
+        continue;
+      }
+      const Eigen::Vector3d axis_camera = T_world_k.linear().transpose() * axis_world;
+      if (result.degenerate_directions.empty()) {
+        ++none_free;
+      } else if (result.degenerate_directions.size() == 1 &&
+                 std::abs(result.degenerate_directions[0].head<3>().dot(axis_camera)) > 0.985) {
+        ++one_free_along;
+      } else {
+        ++other_free;
+      }
+      const slamd::Vector6d error = slamd::planes::observableProjector(result) *
+                                    slamd::logSE3(T_true.inverse() * result.T_target_source);
+      error_mm.push_back(1e3 * error.head<3>().norm());
+      error_deg.push_back(error.tail<3>().norm() * 180.0 / M_PI);
+      T_world_estimate = T_world_estimate * result.T_target_source;
+    }
+    const slamd::SE3 end_error = truth[kFrames - 1].T_world_camera.inverse() * T_world_estimate;
+    const Eigen::Vector3d end_offset_world =
+        T_world_estimate.translation() - truth[kFrames - 1].T_world_camera.translation();
+    state.counters["p50_ms"] = slamd::percentile(frame_ms, 50.0);
+    state.counters["p95_ms"] = slamd::percentile(frame_ms, 95.0);
+    state.counters["failed"] = failed;
+    state.counters["one_free_along"] = one_free_along;
+    state.counters["none_free"] = none_free;
+    state.counters["other_free"] = other_free;
+    state.counters["err_p50_mm"] = slamd::percentile(error_mm, 50.0);
+    state.counters["err_p95_mm"] = slamd::percentile(error_mm, 95.0);
+    state.counters["err_p50_deg"] = slamd::percentile(error_deg, 50.0);
+    state.counters["err_p95_deg"] = slamd::percentile(error_deg, 95.0);
+    state.counters["err_max_deg"] =
+        error_deg.empty() ? 0.0 : *std::max_element(error_deg.begin(), error_deg.end());
+    state.counters["end_rot_deg"] = slamd::rotationAngleRad(end_error.linear()) * 180.0 / M_PI;
+    state.counters["end_across_m"] =
+        (end_offset_world - end_offset_world.dot(axis_world) * axis_world).norm();
+  }
+}
+BENCHMARK(BM_PlaneOdometryCorridor)->Arg(0)->Arg(1)->Iterations(1)->Unit(benchmark::kMillisecond);
 
 }  // namespace
 

@@ -8,6 +8,7 @@
 #include <utility>
 
 #include <Eigen/Eigenvalues>
+#include <Eigen/QR>
 
 namespace slamd::planes {
 
@@ -267,6 +268,19 @@ std::string IcpParams::validationError() const {
         << ": need 0 <= min_depth_m < max_depth_m";
   }
   return out.str();
+}
+
+Matrix6d observableProjector(const IcpResult& result) {
+  if (result.degenerate_directions.empty()) return Matrix6d::Identity();
+  Eigen::Matrix<double, 6, Eigen::Dynamic> free(
+      6, static_cast<Eigen::Index>(result.degenerate_directions.size()));
+  for (std::size_t i = 0; i < result.degenerate_directions.size(); ++i) {
+    free.col(static_cast<Eigen::Index>(i)) = result.degenerate_directions[i];
+  }
+  // An orthonormal basis of the free directions (they are orthogonal only in the scaled space).
+  const Eigen::HouseholderQR<Eigen::Matrix<double, 6, Eigen::Dynamic>> qr(free);
+  const Eigen::MatrixXd basis = qr.householderQ() * Eigen::MatrixXd::Identity(6, free.cols());
+  return Matrix6d::Identity() - basis * basis.transpose();
 }
 
 IcpResult registerPlanes(const PlaneSegmentation& source, const PlaneSegmentation& target,

@@ -18,6 +18,10 @@ constexpr int kMinFitSamples = 6;
 /// axis) and a second eigenvalue 4x the smallest: rejects collinear and tiny point sets.
 constexpr double kMinExtentM = 0.005;
 constexpr double kMinEigenRatio = 4.0;
+/// A final plane whose centroid is seen at less than this sine of an angle to the plane (about
+/// 3 deg) is seen edge-on: a strip of pixels one or two columns wide lies in the plane through
+/// its rays and the optical centre whatever the depths, so the fit says nothing about a surface.
+constexpr double kMinViewSine = 0.05;
 /// Growing uses the segment's plane only once its normal is this well determined (radians, a
 /// rough standard deviation: model RMS / (sqrt(n) * extent)); a plane from a handful of noisy
 /// samples would stop the growth early.
@@ -555,6 +559,7 @@ void PlaneSegmenter::buildPlanes(const cv::Mat& depth_m, const CameraIntrinsics&
     }
     if (!acceptable(fit)) continue;
     if (static_cast<long>(moments.n) * pixels_per_sample < params_.min_plane_px) continue;
+    if (fit.offset_m < kMinViewSine * (moments.p / moments.n).norm()) continue;
 
     Plane plane;
     plane.normal_camera = fit.normal;

@@ -12,7 +12,6 @@
 #include <utility>
 #include <vector>
 
-#include <Eigen/QR>
 #include <gtest/gtest.h>
 
 #include "slamd/common/config.hpp"
@@ -39,16 +38,8 @@ PoseError poseError(const SE3& estimate, const SE3& truth) {
 /// The error with its components along the reported degenerate directions removed: the data
 /// say nothing there, and the estimate stays at the guess by design.
 PoseError observableError(const IcpResult& result, const SE3& truth) {
-  Vector6d error = logSE3(truth.inverse() * result.T_target_source);
-  if (!result.degenerate_directions.empty()) {
-    Eigen::Matrix<double, 6, Eigen::Dynamic> free(6, result.degenerate_directions.size());
-    for (std::size_t i = 0; i < result.degenerate_directions.size(); ++i) {
-      free.col(static_cast<Eigen::Index>(i)) = result.degenerate_directions[i];
-    }
-    const Eigen::HouseholderQR<Eigen::MatrixXd> qr(free);
-    const Eigen::MatrixXd basis = qr.householderQ() * Eigen::MatrixXd::Identity(6, free.cols());
-    error -= basis * (basis.transpose() * error);
-  }
+  const Vector6d error =
+      observableProjector(result) * logSE3(truth.inverse() * result.T_target_source);
   return {error.head<3>().norm(), error.tail<3>().norm() * 180.0 / kPi};
 }
 

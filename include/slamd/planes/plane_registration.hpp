@@ -96,6 +96,10 @@ struct IcpResult {
   double mean_depth_m = 0.0;
 };
 
+/// The projector that removes the components along result.degenerate_directions from a twist
+/// (identity when there are none): what of an error or a correction the data speak for.
+Matrix6d observableProjector(const IcpResult& result);
+
 /// Paper 000's plane-based ICP: source and target are the segmentations of the two frames
 /// (both from frames with `intrinsics`; target.labels is read). T_target_source_guess: the
 /// starting estimate (identity for consecutive frames, or a motion prior).

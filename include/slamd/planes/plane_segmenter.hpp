@@ -42,7 +42,9 @@
 //     cover the small segments colour growing left). Each plane is then refitted twice,
 //     dropping samples beyond 3 robust standard deviations (median-based, never more than
 //     3 sigma_z + outlier_margin_m), so that items a few millimetres off a wall do not tilt it
-//     in precise data. Planes smaller than min_plane_px pixels are dropped.
+//     in precise data. Planes smaller than min_plane_px pixels are dropped, and so are planes
+//     seen edge-on (within about 3 degrees of the ray to their centroid: a strip a column or two
+//     wide lies in the plane through its rays and the optical centre, whatever its depths).
 //
 // Output frame: the camera optical frame (x right, y down, z forward), metres. Each plane is
 // n.p + d = 0 with |n| = 1 and n pointing towards the camera (d > 0 for planes not through the
