@@ -10,6 +10,13 @@ namespace slamd {
 
 namespace {
 constexpr const char* kLog = "slamd";
+
+/// When a periodic walk of the whole map that started at start_ns and took walk_ns may run
+/// again: after period_ns, and never more often than keeps the walks at 1% of the mapping
+/// thread's time (tens of milliseconds for millions of voxels), so that they never set its p99.
+std::int64_t nextWalkNs(std::int64_t start_ns, std::int64_t walk_ns, std::int64_t period_ns) {
+  return start_ns + std::max<std::int64_t>(period_ns, 100 * walk_ns);
+}
 }  // namespace
 
 bool StepBase::enter(std::uint64_t epoch, const RgbdFramePtr& frame) {
@@ -448,15 +455,12 @@ void MappingStep::process(const EstimatedPacket& packet) {
     coarsenFarMap(T_world_camera);
   }
   publishOutputs(mapper_.poll(mapper_.latestUtime()));
-  // Counting voxels walks the whole tree (tens of milliseconds for millions of voxels): once a
-  // second is plenty for the status channel, and no more often than keeps the walks under 1% of
-  // this thread's time.
+  // Counting voxels walks the whole tree: once a second is plenty for the status channel.
   if (const std::int64_t now_ns = steadyNowNs(); now_ns >= next_voxel_count_ns_) {
     const VoxelCounts counts = mapper_.countVoxels();
     leaf_voxels_.store(static_cast<std::int64_t>(counts.leaves), std::memory_order_relaxed);
     occupied_voxels_.store(static_cast<std::int64_t>(counts.occupied), std::memory_order_relaxed);
-    const std::int64_t walk_ns = steadyNowNs() - now_ns;
-    next_voxel_count_ns_ = now_ns + std::max<std::int64_t>(1'000'000'000, 100 * walk_ns);
+    next_voxel_count_ns_ = nextWalkNs(now_ns, steadyNowNs() - now_ns, 1'000'000'000);
   }
   // Last, in what the frame's budget has left after everything else this cycle did (a full map,
   // a voxel count, a coarsening), so that those walks do not come on top of a whole budget's
@@ -472,10 +476,8 @@ void MappingStep::coarsenFarMap(const SE3& T_world_camera) {
   const std::int64_t now_ns = steadyNowNs();
   if (now_ns < next_coarsening_ns_) return;
   const CoarsenResult result = mapper_.coarsenFarMap(T_world_camera.translation());
-  // A walk of the whole tree: at most 1% of this thread's time, like the voxel counts.
   next_coarsening_ns_ =
-      now_ns + std::max<std::int64_t>(kCoarseningPeriodNs,
-                                      static_cast<std::int64_t>(100.0 * result.seconds * 1e9));
+      nextWalkNs(now_ns, static_cast<std::int64_t>(result.seconds * 1e9), kCoarseningPeriodNs);
   if (result.blocks_merged > 0) {
     SLAMD_LOG_INFO(kLog) << "memory over the limit: the map beyond "
                          << mapper_.config().coarse_far_radius_m

@@ -168,6 +168,11 @@ bool pixelOf(const CameraIntrinsics& intrinsics, const Eigen::Vector3d& p, int& 
 
 /// Back-projected points and normals (from each pixel's neighbours, towards the camera) of a
 /// depth image; NaN where the depth, a neighbour's or the surface's continuity is missing.
+/// Not the normals dense alignment uses (tracking/dense_alignment.cpp, from a 5x5 depth average):
+/// those keep creases, where a wall meets the floor, and there their tilt gives whole-cloud ICP
+/// information along a plain corridor that it does not have (tried: the corridor test then finds
+/// no free direction). Dense alignment finds its free directions from the normals' scatter
+/// instead.
 struct PointsAndNormals {
   std::vector<Eigen::Vector3d> points;
   std::vector<Eigen::Vector3d> normals;
