@@ -158,11 +158,20 @@ def main():
             minutes.append({
                 "minute": minute + 1,
                 "seconds": len(window),
+                # Percentiles of the minute's own frames, from slamd's --metrics-out (its minutes
+                # start at the pipeline's start, within a second of these).
+                "end_to_end_p99_ms": None,
+                "end_to_end_frames": None,
                 "end_to_end_p99_ms_max_of_seconds": max(p99s) if p99s else None,
                 "end_to_end_p99_ms_median_of_seconds": percentile(p99s, 0.5),
                 "mapping_p99_ms_max_of_seconds": max(mapping) if mapping else None,
                 "backend_p99_ms_max_of_seconds": max(backend) if backend else None,
             })
+
+    for m, by_minute in zip(minutes, metrics.get("end_to_end_by_minute", [])):
+        m["end_to_end_p99_ms"] = by_minute["p99_ms"]
+        m["end_to_end_frames"] = by_minute["frames"]
+    minute_p99s = [m["end_to_end_p99_ms"] for m in minutes if m["end_to_end_p99_ms"] is not None]
 
     lap2 = laps[1] if len(laps) >= 2 else None
     last = laps[-1] if laps else None
@@ -175,6 +184,7 @@ def main():
         "peak_rss_mb": max(v for _, v in rss) if rss else None,
         "rss_growth_lap2_to_end": growth(lap2 and lap2["rss_mb"], last and last["rss_mb"]),
         "keyframe_growth_lap2_to_end": growth(lap2 and lap2["keyframes"], last and last["keyframes"]),
+        "worst_minute_end_to_end_p99_ms": max(minute_p99s) if minute_p99s else None,
         "worst_minute_end_to_end_p99_ms_max_of_seconds": max(
             (m["end_to_end_p99_ms_max_of_seconds"] or 0.0) for m in minutes) if minutes else None,
         "run_metrics": {k: metrics.get(k) for k in
@@ -214,13 +224,17 @@ def main():
     print(f"soak: keyframes after lap 2 {show(lap2 and lap2['keyframes'], '{}')}, at the end "
           f"{show(last and last['keyframes'], '{}')}: growth "
           f"{show(summary['keyframe_growth_lap2_to_end'], '{:+.1%}')} (target <= +10%)")
-    print("soak: worst minute's capture-to-pose p99 (largest 1 s p99 in the minute): "
-          f"{show(summary['worst_minute_end_to_end_p99_ms_max_of_seconds'], '{:.1f}')} ms (target <= 33)")
+    print("soak: worst minute's capture-to-pose p99 (of the minute's frames): "
+          f"{show(summary['worst_minute_end_to_end_p99_ms'], '{:.1f}')} ms (target <= 33); "
+          "largest p99 of any second (about its slowest frame): "
+          f"{show(summary['worst_minute_end_to_end_p99_ms_max_of_seconds'], '{:.1f}')} ms")
     for lap in laps:
         print(f"  lap {lap['lap']:2d} end {lap['end_s']:7.1f} s: RSS {show(lap['rss_mb'], '{:.0f}')} MB, "
               f"keyframes {show(lap['keyframes'], '{}')}, map voxels {show(lap['map_total_voxels'], '{}')}")
     for m in minutes:
-        print(f"  minute {m['minute']}: capture-to-pose p99 per second: median "
+        print(f"  minute {m['minute']}: capture-to-pose p99 "
+              f"{show(m['end_to_end_p99_ms'], '{:.1f}')} ms of {show(m['end_to_end_frames'], '{}')} frames; "
+              f"p99 per second: median "
               f"{show(m['end_to_end_p99_ms_median_of_seconds'], '{:.1f}')}, max "
               f"{show(m['end_to_end_p99_ms_max_of_seconds'], '{:.1f}')} ms; mapping p99 max "
               f"{show(m['mapping_p99_ms_max_of_seconds'], '{:.0f}')} ms; back end p99 max "

@@ -162,6 +162,9 @@ struct SlamDaemon::Impl {
   std::atomic<MemoryPressure> memory_pressure{MemoryPressure::kNone};
   double resident_mb = 0.0;  ///< at the latest status message (control thread)
 
+  /// Capture-to-pose latency minute by minute (control thread, at the status messages).
+  WindowedLatency end_to_end_by_minute{60.0};
+
   DaemonSummary summary;
 
   Impl(Config& c, const DaemonOverrides& overrides) : config(c) {
@@ -631,6 +634,7 @@ std::string SlamDaemon::Impl::controlLoop(ShutdownSignals& signals, LcmBus& bus,
     if (steadyNowNs() >= next_status_ns) {
       publishStatus(bus, status_builder, pipeline, steps->capture->paused() ? "paused" : "");
       next_status_ns += status_period_ns;
+      end_to_end_by_minute.update(steadyNowNs(), steps->publish->endToEnd().snapshot());
     }
     if (pipeline.waitUntilFinished(std::chrono::steady_clock::now())) return "end of input";
   }
@@ -651,6 +655,7 @@ int SlamDaemon::Impl::run(ShutdownSignals& signals) {
 
   StatusBuilder status_builder;
   pipeline.start();
+  end_to_end_by_minute.start(steadyNowNs(), steps->publish->endToEnd().snapshot());
   const std::string stop_reason = controlLoop(signals, *bus, pipeline, status_builder);
   SLAMD_LOG_INFO(kLog) << "stopping (" << stop_reason << "): draining queued frames";
   steps->capture->resume();
@@ -660,6 +665,7 @@ int SlamDaemon::Impl::run(ShutdownSignals& signals) {
     SLAMD_LOG_WARN(kLog) << "drain deadline passed; " << stop.discarded << " frames discarded";
   }
   source->close();
+  end_to_end_by_minute.finish(steadyNowNs(), steps->publish->endToEnd().snapshot());
   publishStatus(*bus, status_builder, pipeline, "stopped: " + stop_reason);
   bus->stopHandling();
 
@@ -742,6 +748,7 @@ void SlamDaemon::Impl::summarize(const std::vector<StageStats>& stats,
   summary.end_to_end_p50_ms = latency.p50_ms;
   summary.end_to_end_p95_ms = latency.p95_ms;
   summary.end_to_end_p99_ms = latency.p99_ms;
+  summary.end_to_end_by_minute = end_to_end_by_minute.windows();
 }
 
 void SlamDaemon::Impl::logSummary(const std::vector<StageStats>& stats,
@@ -770,6 +777,16 @@ void SlamDaemon::Impl::logSummary(const std::vector<StageStats>& stats,
                        << summary.duration_s << " s; capture-to-pose latency p50 "
                        << summary.end_to_end_p50_ms << " ms, p95 " << summary.end_to_end_p95_ms
                        << " ms, p99 " << summary.end_to_end_p99_ms << " ms";
+  if (summary.end_to_end_by_minute.size() > 1) {
+    const auto worst =
+        std::max_element(summary.end_to_end_by_minute.begin(), summary.end_to_end_by_minute.end(),
+                         [](const LatencyWindow& a, const LatencyWindow& b) {
+                           return a.latency.p99_ms < b.latency.p99_ms;
+                         });
+    SLAMD_LOG_INFO(kLog) << "capture-to-pose latency by minute: worst p99 " << worst->latency.p99_ms
+                         << " ms in minute " << (worst - summary.end_to_end_by_minute.begin()) + 1
+                         << " of " << summary.end_to_end_by_minute.size();
+  }
   logTrackingSummary();
   logDropSummary(stats, source_stats);
   if (source_stats.clock_reanchors > 0) {
@@ -903,6 +920,19 @@ bool SlamDaemon::Impl::writeMetrics(const std::vector<StageStats>& stats) {
   json.key("end_to_end_p50_ms").value(summary.end_to_end_p50_ms);
   json.key("end_to_end_p95_ms").value(summary.end_to_end_p95_ms);
   json.key("end_to_end_p99_ms").value(summary.end_to_end_p99_ms);
+  // Each minute's own frames: a long run's whole-run p99 hides a bad minute.
+  json.key("end_to_end_by_minute").beginArray();
+  for (const LatencyWindow& minute : summary.end_to_end_by_minute) {
+    json.beginObject();
+    json.key("start_s").value(minute.start_s);
+    json.key("length_s").value(minute.length_s);
+    json.key("frames").value(static_cast<std::int64_t>(minute.latency.count));
+    json.key("p50_ms").value(minute.latency.p50_ms);
+    json.key("p99_ms").value(minute.latency.p99_ms);
+    json.key("max_ms").value(minute.latency.max_ms);
+    json.endObject();
+  }
+  json.endArray();
   // Resident memory at the status messages, and how often the memory limit made slamd degrade.
   json.key("memory").beginObject();
   json.key("limit_mb").value(daemon.memory_limit_mb);

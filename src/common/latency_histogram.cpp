@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <utility>
 
 namespace slamd {
 
@@ -92,6 +93,44 @@ void LatencyHistogram::reset() {
   for (auto& count : counts_) count.store(0, std::memory_order_relaxed);
   max_ns_.store(0, std::memory_order_relaxed);
   sum_ns_.store(0, std::memory_order_relaxed);
+}
+
+std::vector<std::uint64_t> histogramDelta(const std::vector<std::uint64_t>& later,
+                                          const std::vector<std::uint64_t>& earlier) {
+  std::vector<std::uint64_t> delta = later;
+  for (std::size_t i = 0; i < delta.size() && i < earlier.size(); ++i) {
+    delta[i] = later[i] >= earlier[i] ? later[i] - earlier[i] : 0;
+  }
+  return delta;
+}
+
+WindowedLatency::WindowedLatency(double window_s) : window_s_(window_s) {}
+
+void WindowedLatency::start(std::int64_t now_ns, std::vector<std::uint64_t> snapshot) {
+  run_start_ns_ = now_ns;
+  window_start_ns_ = now_ns;
+  window_start_counts_ = std::move(snapshot);
+  windows_.clear();
+}
+
+void WindowedLatency::update(std::int64_t now_ns, const std::vector<std::uint64_t>& snapshot) {
+  if (static_cast<double>(now_ns - window_start_ns_) * 1e-9 >= window_s_) close(now_ns, snapshot);
+}
+
+void WindowedLatency::finish(std::int64_t now_ns, const std::vector<std::uint64_t>& snapshot) {
+  if (LatencyHistogram::summarize(histogramDelta(snapshot, window_start_counts_)).count > 0) {
+    close(now_ns, snapshot);
+  }
+}
+
+void WindowedLatency::close(std::int64_t now_ns, const std::vector<std::uint64_t>& snapshot) {
+  LatencyWindow window;
+  window.start_s = static_cast<double>(window_start_ns_ - run_start_ns_) * 1e-9;
+  window.length_s = static_cast<double>(now_ns - window_start_ns_) * 1e-9;
+  window.latency = LatencyHistogram::summarize(histogramDelta(snapshot, window_start_counts_));
+  windows_.push_back(window);
+  window_start_ns_ = now_ns;
+  window_start_counts_ = snapshot;
 }
 
 double percentile(std::vector<double> samples, double q) {

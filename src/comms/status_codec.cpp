@@ -5,15 +5,6 @@
 
 namespace slamd {
 
-std::vector<std::uint64_t> histogramDelta(const std::vector<std::uint64_t>& later,
-                                          const std::vector<std::uint64_t>& earlier) {
-  std::vector<std::uint64_t> delta = later;
-  for (std::size_t i = 0; i < delta.size() && i < earlier.size(); ++i) {
-    delta[i] = later[i] >= earlier[i] ? later[i] - earlier[i] : 0;
-  }
-  return delta;
-}
-
 slamd::status_t StatusBuilder::build(Utime now_utime, std::int64_t now_steady_ns,
                                      const std::vector<StageStats>& stages,
                                      const std::vector<std::uint64_t>& end_to_end_buckets,

@@ -44,6 +44,40 @@ TEST(LatencyHistogram, EmptyHistogramSummarisesToZero) {
   EXPECT_EQ(histogram.summary().p99_ms, 0.0);
 }
 
+TEST(WindowedLatency, EachWindowSummarisesOnlyItsOwnSamples) {
+  // Three minutes fed once a second: the second minute holds 30 slow frames among 1770 fast ones
+  // (its p99 is slow), the first and third only fast ones; the whole run's p99 hides the bad
+  // minute.
+  constexpr std::int64_t kSecondNs = 1'000'000'000;
+  LatencyHistogram histogram;
+  WindowedLatency by_minute(60.0);
+  by_minute.start(0, histogram.snapshot());
+  for (int second = 1; second <= 150; ++second) {
+    for (int frame = 0; frame < 30; ++frame) {
+      const bool slow = second > 60 && second <= 120 && second % 2 == 0 && frame == 0;
+      histogram.recordNs(slow ? 80'000'000 : 10'000'000);
+    }
+    by_minute.update(second * kSecondNs, histogram.snapshot());
+  }
+  ASSERT_EQ(by_minute.windows().size(), 2u);
+  by_minute.finish(150 * kSecondNs, histogram.snapshot());
+  by_minute.finish(150 * kSecondNs, histogram.snapshot());  // nothing new: no empty window
+  const auto& windows = by_minute.windows();
+  ASSERT_EQ(windows.size(), 3u);
+  EXPECT_DOUBLE_EQ(windows[0].start_s, 0.0);
+  EXPECT_DOUBLE_EQ(windows[1].start_s, 60.0);
+  EXPECT_DOUBLE_EQ(windows[2].start_s, 120.0);
+  EXPECT_DOUBLE_EQ(windows[2].length_s, 30.0);
+  EXPECT_EQ(windows[0].latency.count, 1800u);
+  EXPECT_EQ(windows[1].latency.count, 1800u);
+  EXPECT_EQ(windows[2].latency.count, 900u);
+  EXPECT_LT(windows[0].latency.p99_ms, 11.0);
+  EXPECT_GT(windows[1].latency.p99_ms, 70.0);
+  EXPECT_LT(windows[1].latency.p50_ms, 11.0);
+  EXPECT_LT(windows[2].latency.p99_ms, 11.0);
+  EXPECT_LT(histogram.summary().p99_ms, 11.0);  // 30 of 4500 frames: under the whole run's p99
+}
+
 TEST(Percentile, InterpolatesLikeNumpy) {
   EXPECT_DOUBLE_EQ(percentile({1, 2, 3, 4}, 50), 2.5);
   EXPECT_DOUBLE_EQ(percentile({5}, 95), 5.0);

@@ -24,8 +24,10 @@
 #include <functional>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "slamd/common/config.hpp"
+#include "slamd/common/latency_histogram.hpp"
 #include "slamd/common/shutdown_signals.hpp"
 
 namespace slamd {
@@ -105,6 +107,8 @@ struct DaemonSummary {
   double end_to_end_p50_ms = 0.0;
   double end_to_end_p95_ms = 0.0;
   double end_to_end_p99_ms = 0.0;
+  /// Capture-to-pose latency of each minute of the run (the last one may be shorter).
+  std::vector<LatencyWindow> end_to_end_by_minute;
 };
 
 class SlamDaemon {

@@ -57,10 +57,6 @@ class StatusBuilder {
   std::int64_t previous_steady_ns_ = 0;
 };
 
-/// Bucket-wise difference later - earlier (earlier may be empty: all zeros).
-std::vector<std::uint64_t> histogramDelta(const std::vector<std::uint64_t>& later,
-                                          const std::vector<std::uint64_t>& earlier);
-
 /// The table slamd-status prints for one status message: one row per stage, then end-to-end
 /// latency, tracking state, map and back end. Any field values (a received message) are safe.
 /// @param malformed status messages the caller ignored as malformed (0: no line about them)
