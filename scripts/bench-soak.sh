@@ -86,11 +86,29 @@ soak_run() {
   local slamd=$!
   local start_ns
   start_ns=$(date +%s%N)
-  echo -e "t_s\trss_kb" > rss.tsv
+  # Besides RSS, the CPU time of the whole machine and of slamd over each interval, in cores: a
+  # second where slamd's stages take far longer than their CPU time while neither is busy points
+  # at the host, not at slamd.
+  echo -e "t_s\trss_kb\tmachine_busy_cores\tslamd_cores" > rss.tsv
+  local ticks cores prev_busy=0 prev_total=0 prev_slamd=0 prev_ns=$start_ns
+  ticks=$(getconf CLK_TCK)
+  cores=$(nproc)
   while kill -0 $slamd 2> /dev/null; do
-    local rss_kb
+    local rss_kb now_ns busy total slamd_ticks
     rss_kb=$(awk '/^VmRSS:/ { print $2 }' "/proc/$slamd/status" 2> /dev/null || true)
-    [ -n "$rss_kb" ] && echo -e "$(( ($(date +%s%N) - start_ns) / 1000000 ))e-3\t$rss_kb" >> rss.tsv
+    now_ns=$(date +%s%N)
+    read -r busy total < <(awk '/^cpu / { t = 0; for (i = 2; i <= 9; ++i) t += $i;
+                                           print t - $5 - $6, t }' /proc/stat)
+    slamd_ticks=$(awk '{ sub(/^.*\) /, ""); print $12 + $13 }' "/proc/$slamd/stat" 2> /dev/null || echo 0)
+    if [ -n "$rss_kb" ]; then
+      awk -v t="$(( (now_ns - start_ns) / 1000000 ))" -v rss="$rss_kb" -v b="$busy" -v pb="$prev_busy" \
+          -v tot="$total" -v pt="$prev_total" -v c="$cores" -v s="$slamd_ticks" -v ps="$prev_slamd" \
+          -v dt="$(( now_ns - prev_ns ))" -v hz="$ticks" 'BEGIN {
+            machine = (tot > pt && pt > 0) ? c * (b - pb) / (tot - pt) : 0
+            own = (dt > 0 && ps > 0) ? (s - ps) / hz / (dt * 1e-9) : 0
+            printf "%se-3\t%s\t%.3f\t%.3f\n", t, rss, machine, own }' >> rss.tsv
+    fi
+    prev_busy=$busy prev_total=$total prev_slamd=$slamd_ticks prev_ns=$now_ns
     sleep 1
   done
   local rc=0

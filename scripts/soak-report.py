@@ -19,13 +19,16 @@ def percentile(values, fraction):
 
 
 def read_rss(path):
-    series = []
+    """RSS (MB) over time, and (t_s, machine busy cores, slamd cores) where recorded."""
+    series, cpu = [], []
     with open(path) as f:
         next(f)
         for line in f:
-            t_s, rss_kb = line.split()
-            series.append((float(t_s), int(rss_kb) / 1024.0))
-    return series
+            fields = line.split()
+            series.append((float(fields[0]), int(fields[1]) / 1024.0))
+            if len(fields) >= 4:
+                cpu.append((float(fields[0]), float(fields[2]), float(fields[3])))
+    return series, cpu
 
 
 def read_status(path):
@@ -121,7 +124,7 @@ def main():
     parser.add_argument("--frames", type=int, required=True)
     args = parser.parse_args()
 
-    rss = read_rss(os.path.join(args.out, "rss.tsv"))
+    rss, cpu = read_rss(os.path.join(args.out, "rss.tsv"))
     status = read_status(os.path.join(args.out, "status.csv"))
     with open(os.path.join(args.out, "ate.json")) as f:
         ate = json.load(f)
@@ -154,6 +157,7 @@ def main():
             window = [r for r in status if minute * 60 <= r["t_s"] < (minute + 1) * 60]
             p99s = [r["end_to_end_p99_ms"] for r in window if r["end_to_end_p99_ms"] > 0]
             mapping = [r["stage_p99_ms"].get("mapping", 0.0) for r in window]
+            cpu_window = [c for c in cpu if minute * 60 <= c[0] < (minute + 1) * 60]
             backend = [r["stage_p99_ms"].get("backend", 0.0) for r in window]
             minutes.append({
                 "minute": minute + 1,
@@ -166,6 +170,10 @@ def main():
                 "end_to_end_p99_ms_median_of_seconds": percentile(p99s, 0.5),
                 "mapping_p99_ms_max_of_seconds": max(mapping) if mapping else None,
                 "backend_p99_ms_max_of_seconds": max(backend) if backend else None,
+                # Cores busy, the whole machine's and slamd's, over the minute's seconds.
+                "machine_busy_cores_max": max(c[1] for c in cpu_window) if cpu_window else None,
+                "slamd_cores_mean": (sum(c[2] for c in cpu_window) / len(cpu_window)
+                                     if cpu_window else None),
             })
 
     for m, by_minute in zip(minutes, metrics.get("end_to_end_by_minute", [])):
@@ -194,6 +202,7 @@ def main():
         "minutes": minutes,
         "series": {
             "rss_mb": rss,
+            "cores_busy": [{"t_s": t, "machine": m, "slamd": own} for t, m, own in cpu],
             "status": [{k: r[k] for k in ("t_s", "keyframes", "loops", "map_occupied_voxels",
                                            "map_total_voxels", "end_to_end_p50_ms",
                                            "end_to_end_p99_ms", "stage_p99_ms")} for r in status],
@@ -238,7 +247,8 @@ def main():
               f"{show(m['end_to_end_p99_ms_median_of_seconds'], '{:.1f}')}, max "
               f"{show(m['end_to_end_p99_ms_max_of_seconds'], '{:.1f}')} ms; mapping p99 max "
               f"{show(m['mapping_p99_ms_max_of_seconds'], '{:.0f}')} ms; back end p99 max "
-              f"{show(m['backend_p99_ms_max_of_seconds'], '{:.0f}')} ms")
+              f"{show(m['backend_p99_ms_max_of_seconds'], '{:.0f}')} ms; cores busy: machine max "
+              f"{show(m['machine_busy_cores_max'], '{:.2f}')}, slamd mean {show(m['slamd_cores_mean'], '{:.2f}')}")
     print(f"soak: wrote {os.path.join(args.out, 'soak.json')} and {os.path.join(args.out, 'soak.svg')}")
 
 
