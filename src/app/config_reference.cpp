@@ -39,6 +39,7 @@ std::vector<ConfigKeyDescription> allKeys() {
   append(MotionLimits::schema().describe());
   append(VanishingPointConfig::schema().describe());
   append(SurfaceAxesConfig::schema().describe());
+  append(PlaneOdometryConfig::schema().describe());
   append(MappingConfig::schema().describe());
   append(BackendConfig::schema().describe());
   append(CameraConfig::schema().describe());

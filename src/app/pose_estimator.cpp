@@ -1,5 +1,10 @@
 #include "slamd/app/pose_estimator.hpp"
 
+#include <cmath>
+
+#include "slamd/filter/motion_fusion.hpp"
+#include "slamd/planes/plane_registration.hpp"
+
 namespace slamd {
 
 PoseEstimator::PoseEstimator(const FilterConfig& config, VanishingPointSource vanishing_points)
@@ -10,6 +15,69 @@ void PoseEstimator::reset() {
   last_pose_ = PoseEstimate();
   covariance_last_measured_.reset();
   last_utime_ = 0;
+  corridor_.on.store(false, std::memory_order_relaxed);
+  frames_with_features_ = 0;
+  previous_planes_.reset();
+}
+
+void PoseEstimator::updateCorridorMode(const OdometryResult& odometry) {
+  if (!config_.planes.enabled) return;
+  const bool measured_by_features = (odometry.tracking_state == TrackingState::kOk ||
+                                     odometry.tracking_state == TrackingState::kRelocalized) &&
+                                    !odometry.stats.used_dense_alignment;
+  const bool features_ran_out =
+      !measured_by_features || odometry.stats.num_inliers < config_.planes.corridor_min_inliers;
+  const bool on = corridor_.on.load(std::memory_order_relaxed);
+  if (features_ran_out) {
+    frames_with_features_ = 0;
+    if (!on) {
+      corridor_.on.store(true, std::memory_order_relaxed);
+      corridor_.switched_on.fetch_add(1, std::memory_order_relaxed);
+    }
+  } else if (on && ++frames_with_features_ >= config_.planes.corridor_exit_frames) {
+    corridor_.on.store(false, std::memory_order_relaxed);
+  }
+  if (corridor_.on.load(std::memory_order_relaxed)) {
+    corridor_.frames.fetch_add(1, std::memory_order_relaxed);
+  }
+}
+
+void PoseEstimator::fusePlaneOdometry(const planes::PlaneSegmentation& planes,
+                                      const OdometryResult& odometry,
+                                      const CameraIntrinsics& intrinsics, FilterInput& input) {
+  if (!previous_planes_) return;
+  if (previous_planes_->utime != odometry.prev_utime) {
+    corridor_.unmatched.fetch_add(1, std::memory_order_relaxed);
+    return;
+  }
+  planes::IcpParams params;
+  params.points_per_plane = config_.planes.points_per_plane;
+  // The current frame's planes are the source: T_target_source is T_prev_curr. Tracking's
+  // increment is the starting point: at a turn the identity can be several centimetres off at
+  // the walls, beyond where the associations converge.
+  const planes::IcpResult icp = planes::registerPlanes(planes, *previous_planes_->planes,
+                                                       intrinsics, input.T_prev_curr, params);
+  if (!icp.ok) {
+    corridor_.registrations_failed.fetch_add(1, std::memory_order_relaxed);
+    return;
+  }
+  Matrix6d information = icp.information * config_.planes.information_scale;
+  if (!config_.planes.fuse_rotation) information = translationInformation(information);
+  // The EKF scales the odometry covariance by odometry_covariance_scale; fusing against the
+  // scaled one weighs the two as the filter will.
+  const double scale = config_.odometry_covariance_scale;
+  const MotionFusionResult fused =
+      fuseMotion(input.T_prev_curr, input.covariance * scale, icp.T_target_source, information,
+                 config_.planes.gate_probability);
+  if (!fused.fused) {
+    if (fused.measured_directions > 0) corridor_.gated.fetch_add(1, std::memory_order_relaxed);
+    return;
+  }
+  input.T_prev_curr = fused.T_prev_curr;
+  input.covariance = fused.covariance / scale;
+  corridor_.fused.fetch_add(1, std::memory_order_relaxed);
+  corridor_.nis_sum_milli.fetch_add(static_cast<std::uint64_t>(std::lround(fused.nis * 1000.0)),
+                                    std::memory_order_relaxed);
 }
 
 EstimatedPacket PoseEstimator::process(TrackedPacket packet) {
@@ -29,6 +97,15 @@ EstimatedPacket PoseEstimator::process(TrackedPacket packet) {
   input.T_prev_curr = last_utime_ > 0 ? odometry.T_prev_curr : SE3::Identity();
   input.covariance = last_utime_ > 0 ? odometry.covariance : Matrix6d::Identity() * 1e-12;
   input.dt_s = last_utime_ > 0 ? utimeToSeconds(odometry.utime - last_utime_) : 0.0;
+  updateCorridorMode(odometry);
+  if (config_.planes.enabled && packet.plane_segmentation && packet.plane_segmentation->planes) {
+    if (last_utime_ > 0 && odometry.tracking_state != TrackingState::kRelocalized) {
+      fusePlaneOdometry(*packet.plane_segmentation->planes, odometry, frame.intrinsics, input);
+    }
+    previous_planes_ = FramePlanes{odometry.utime, packet.plane_segmentation->planes};
+  } else {
+    previous_planes_.reset();
+  }
   // (A covariance of the last measured frame implies an earlier frame: last_utime_ > 0.)
   if (odometry.tracking_state == TrackingState::kRelocalized && covariance_last_measured_) {
     // The step from the pose held through the loss to the relocalised one is applied exactly,

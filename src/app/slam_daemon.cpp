@@ -89,10 +89,12 @@ struct DaemonSteps {
   SpscQueue<PoseCorrection> pose_corrections{64};
   SpscQueue<MapCorrection> map_corrections{64};
   VanishingPointChannel vanishing_points;
+  PlaneSegmentationChannel plane_segmentation;
   std::optional<LcmFramePublisher> frame_publisher;  ///< used by the capture thread only
   std::optional<CaptureStep> capture;
   std::optional<TrackingStep> tracking;
   std::optional<VanishingPointStep> vanishing;
+  std::optional<PlaneSegmentationStep> planes;
   std::optional<FilterStep> filter;
   std::optional<PublishStep> publish;
   std::optional<MappingStep> mapping;
@@ -416,6 +418,12 @@ void SlamDaemon::Impl::publishStatus(LcmBus& bus, StatusBuilder& builder, Pipeli
         " of " + std::to_string(daemon.memory_limit_mb) + " MB): fewer keyframes and kept clouds" +
         (memory_governor.level() == MemoryPressure::kOver ? ", coarser map far away" : "");
   }
+  if (steps->filter && steps->filter->corridorMode().on.load(std::memory_order_relaxed)) {
+    extras.message += (extras.message.empty() ? "" : "; ") +
+                      std::string("corridor mode: features ran out, plane odometry fused (") +
+                      std::to_string(steps->filter->corridorMode().fused.load()) +
+                      " increments so far)";
+  }
   if (not_localized) {
     extras.message += (extras.message.empty() ? "" : "; ") +
                       std::string(
@@ -542,7 +550,10 @@ void SlamDaemon::Impl::buildSteps(LcmBus& bus, DaemonPublisher& publisher) {
   const auto wait = source->isLive() ? std::chrono::microseconds(static_cast<std::int64_t>(
                                            daemon.vanishing_point_wait_ms * 1000.0))
                                      : std::chrono::microseconds(2'000'000);
-  s.filter.emplace(filter_config, vanishing_point_thread ? &s.vanishing_points : nullptr, wait);
+  // The corridor mode's plane segmentation: its own thread too, joined the same way.
+  if (filter_config.enabled && filter_config.planes.enabled) s.planes.emplace(s.plane_segmentation);
+  s.filter.emplace(filter_config, vanishing_point_thread ? &s.vanishing_points : nullptr, wait,
+                   s.planes ? &s.plane_segmentation : nullptr);
   s.publish.emplace(publisher, daemon.world_frame, daemon.camera_frame,
                     backend ? &s.pose_corrections : nullptr);
   if (session) s.publish->awaitMapFrame();
@@ -602,6 +613,8 @@ void SlamDaemon::Impl::wire(Pipeline& pipeline) {
       "tracking",  captured,  frames,     body(*s.tracking));
   if (s.vanishing) pipeline.addSink<CapturePacket>(
       "vanishing", captured,  frames,     body(*s.vanishing));
+  if (s.planes) pipeline.addSink<CapturePacket>(
+      "planes",    captured,  frames,     body(*s.planes));
   auto estimated = pipeline.addStage<TrackedPacket, EstimatedPacket>(
       "filter",    tracked,   filter_in,  body(*s.filter));
   pipeline.addSink<EstimatedPacket>(
@@ -749,6 +762,18 @@ void SlamDaemon::Impl::summarize(const std::vector<StageStats>& stats,
   summary.end_to_end_p95_ms = latency.p95_ms;
   summary.end_to_end_p99_ms = latency.p99_ms;
   summary.end_to_end_by_minute = end_to_end_by_minute.windows();
+  const CorridorModeStats& corridor = steps->filter->corridorMode();
+  summary.corridor_mode_switched_on = corridor.switched_on.load();
+  summary.corridor_mode_frames = corridor.frames.load();
+  summary.plane_increments_fused = corridor.fused.load();
+  summary.plane_increments_gated = corridor.gated.load();
+  summary.plane_increments_unmatched = corridor.unmatched.load();
+  summary.plane_increments_mean_nis = summary.plane_increments_fused > 0
+                                          ? 1e-3 *
+                                                static_cast<double>(corridor.nis_sum_milli.load()) /
+                                                static_cast<double>(summary.plane_increments_fused)
+                                          : 0.0;
+  summary.plane_registrations_failed = corridor.registrations_failed.load();
 }
 
 void SlamDaemon::Impl::logSummary(const std::vector<StageStats>& stats,
@@ -788,6 +813,14 @@ void SlamDaemon::Impl::logSummary(const std::vector<StageStats>& stats,
                          << " of " << summary.end_to_end_by_minute.size();
   }
   logTrackingSummary();
+  if (summary.corridor_mode_switched_on > 0) {
+    SLAMD_LOG_INFO(kLog) << "corridor mode: on " << summary.corridor_mode_switched_on << " times, "
+                         << summary.corridor_mode_frames << " frames; plane increments "
+                         << summary.plane_increments_fused << " fused (mean NIS "
+                         << summary.plane_increments_mean_nis << "), "
+                         << summary.plane_increments_gated << " gated, "
+                         << summary.plane_registrations_failed << " registrations failed";
+  }
   logDropSummary(stats, source_stats);
   if (source_stats.clock_reanchors > 0) {
     SLAMD_LOG_WARN(kLog) << "source: its clock jumped and was re-anchored "
@@ -933,6 +966,20 @@ bool SlamDaemon::Impl::writeMetrics(const std::vector<StageStats>& stats) {
     json.endObject();
   }
   json.endArray();
+  // The corridor mode (issue 23 item 4): how often features ran out, and what the planes gave.
+  json.key("corridor_mode").beginObject();
+  json.key("switched_on").value(static_cast<std::int64_t>(summary.corridor_mode_switched_on));
+  json.key("frames").value(static_cast<std::int64_t>(summary.corridor_mode_frames));
+  json.key("plane_increments_fused")
+      .value(static_cast<std::int64_t>(summary.plane_increments_fused));
+  json.key("plane_increments_gated")
+      .value(static_cast<std::int64_t>(summary.plane_increments_gated));
+  json.key("plane_increments_unmatched")
+      .value(static_cast<std::int64_t>(summary.plane_increments_unmatched));
+  json.key("plane_increments_mean_nis").value(summary.plane_increments_mean_nis);
+  json.key("plane_registrations_failed")
+      .value(static_cast<std::int64_t>(summary.plane_registrations_failed));
+  json.endObject();
   // Resident memory at the status messages, and how often the memory limit made slamd degrade.
   json.key("memory").beginObject();
   json.key("limit_mb").value(daemon.memory_limit_mb);

@@ -119,48 +119,56 @@ std::optional<TrackedPacket> TrackingStep::process(CapturePacket packet) {
 void VanishingPointStep::process(CapturePacket packet) {
   if (!enter(packet.reset_epoch, packet.frame) || !packet.frame) return;
   if (!detector_) detector_.emplace(config_, packet.frame->intrinsics);
-  VanishingPointPacket out{packet.frame->utime, detector_->detect(packet.frame->gray)};
-  if (!channel_.queue.tryPush(std::move(out))) {
-    channel_.overflowed.fetch_add(1, std::memory_order_relaxed);
+  channel_.push(VanishingPointPacket{packet.frame->utime, detector_->detect(packet.frame->gray)});
+}
+
+// --- plane segmentation ----------------------------------------------------------------------
+
+void PlaneSegmentationStep::process(CapturePacket packet) {
+  if (!enter(packet.reset_epoch, packet.frame) || !packet.frame) return;
+  PlaneSegmentationPacket out;
+  out.utime = packet.frame->utime;
+  if (channel_.corridor_mode.load(std::memory_order_relaxed)) {
+    try {
+      auto planes = std::make_shared<planes::PlaneSegmentation>(segmenter_.segment(*packet.frame));
+      planes->labels = planes->labels.clone();  // the segmenter reuses its buffer
+      out.planes = std::move(planes);
+      segmented_.fetch_add(1, std::memory_order_relaxed);
+    } catch (...) {
+      // A frame the segmenter refuses (wrong sizes or types): the filter still gets its packet,
+      // unsegmented; the pipeline counts the error.
+      channel_.push(std::move(out));
+      throw;
+    }
   }
-  channel_.ready.notify();
+  channel_.push(std::move(out));
 }
 
 // --- filter ----------------------------------------------------------------------------------
 
 FilterStep::FilterStep(const FilterConfig& config, VanishingPointChannel* vanishing_points,
-                       std::chrono::microseconds vanishing_point_wait)
+                       std::chrono::microseconds result_wait,
+                       PlaneSegmentationChannel* plane_segmentation)
     : estimator_(config, vanishing_points ? VanishingPointSource::kPrecomputed
                                           : VanishingPointSource::kDetectHere),
-      vanishing_points_(vanishing_points),
-      vanishing_point_wait_(vanishing_point_wait) {}
+      vanishing_points_(vanishing_points, result_wait),
+      plane_segmentation_(plane_segmentation, result_wait),
+      plane_channel_(plane_segmentation) {}
 
 std::optional<EstimatedPacket> FilterStep::process(TrackedPacket packet) {
   if (!enter(packet.reset_epoch, packet.frame)) return std::nullopt;
-  if (vanishing_points_ && packet.frame) {
-    packet.vanishing_point = takeVanishingPoint(packet.frame->utime);
+  if (vanishing_points_.connected() && packet.frame) {
+    std::optional<VanishingPointPacket> result = vanishing_points_.take(packet.frame->utime);
+    if (result) packet.vanishing_point = std::move(result->detection);
   }
-  return estimator_.process(std::move(packet));
-}
-
-std::optional<VanishingPoint> FilterStep::takeVanishingPoint(Utime utime) {
-  VanishingPointChannel& channel = *vanishing_points_;
-  const auto deadline = std::chrono::steady_clock::now() + vanishing_point_wait_;
-  while (true) {
-    const auto seen = channel.ready.epoch();
-    if (!held_) held_ = channel.queue.tryPop();
-    // Detections of frames tracking skipped are passed over.
-    while (held_ && held_->utime < utime) held_ = channel.queue.tryPop();
-    if (held_ && held_->utime == utime) {
-      std::optional<VanishingPoint> detection = std::move(held_->detection);
-      held_.reset();
-      return detection;
-    }
-    if (held_) break;  // the next detection is of a later frame: this frame's was dropped
-    if (!channel.ready.waitFor(seen, deadline)) break;
+  if (plane_segmentation_.connected() && packet.frame) {
+    packet.plane_segmentation = plane_segmentation_.take(packet.frame->utime);
   }
-  channel.late.fetch_add(1, std::memory_order_relaxed);
-  return std::nullopt;
+  EstimatedPacket out = estimator_.process(std::move(packet));
+  if (plane_channel_) {
+    plane_channel_->corridor_mode.store(estimator_.corridorModeOn(), std::memory_order_relaxed);
+  }
+  return out;
 }
 
 // --- publish ---------------------------------------------------------------------------------

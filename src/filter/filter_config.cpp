@@ -149,11 +149,44 @@ const ConfigSchema<FilterConfig>& FilterConfig::schema() {
   return table;
 }
 
+const ConfigSchema<PlaneOdometryConfig>& PlaneOdometryConfig::schema() {
+  using C = PlaneOdometryConfig;
+  static const auto table =
+      ConfigSchema<C>("filter.planes")
+          .flag("enabled", &C::enabled,
+                "the corridor mode: where features run out, frames are segmented into planes (own "
+                "thread) and plane ICP against the previous frame is fused with tracking's "
+                "increment; off by default: it made held-out corridors worse (docs/planes.md)")
+          .number("corridor_min_inliers", &C::corridor_min_inliers, 0, 100000, "inliers",
+                  "a frame tracked with fewer inliers (or not measured by features) switches "
+                  "the corridor mode on")
+          .number("corridor_exit_frames", &C::corridor_exit_frames, 1, 100000, "frames",
+                  "consecutive frames with enough inliers that switch it off again")
+          .number("information_scale", &C::information_scale, 1e-6, 1e6, "",
+                  "multiplies plane ICP's information matrix (its samples are not independent)")
+          .number("gate_probability", &C::gate_probability, 0.95, 0.999, "",
+                  "plane and tracking increments that disagree beyond this chi-square quantile "
+                  "are not fused (0.95, 0.99 or 0.999)")
+          .number("points_per_plane", &C::points_per_plane, 10, 100000, "points",
+                  "points drawn on each plane for ICP (paper 000)")
+          .flag("fuse_rotation", &C::fuse_rotation,
+                "also fuse the rotation the planes measure (off: their translation only, the "
+                "rotation marginalised out)");
+  return table;
+}
+
+PlaneOdometryConfig PlaneOdometryConfig::load(Config& config) {
+  PlaneOdometryConfig c;
+  schema().load(config, c);
+  return c;
+}
+
 FilterConfig FilterConfig::load(Config& config) {
   FilterConfig c;
   schema().load(config, c);
   c.axes = SurfaceAxesConfig::load(config);
   c.vp = VanishingPointConfig::load(config);
+  c.planes = PlaneOdometryConfig::load(config);
   c.motion_limits = MotionLimits::load(config);
   return c;
 }

@@ -91,6 +91,33 @@ TEST_F(DaemonInProcess, BackEndThreadRunsAlongsideTheOtherStages) {
   EXPECT_TRUE(std::filesystem::exists(overrides.map_out));
 }
 
+TEST_F(DaemonInProcess, InAPlainCorridorTheCorridorModeComesOnAndFusesPlaneOdometry) {
+  // Walls with almost no texture (issue 23's plain corridor): tracking runs on few inliers, so
+  // the corridor mode switches on and the frames' plane increments are fused.
+  const auto plainCorridor = [this](bool corridor_mode) {
+    Config config = smallSyntheticConfig(90);
+    config.set("synthetic.texture_density", "0.04");
+    config.set("synthetic.posters", "false");
+    if (corridor_mode) config.set("filter.planes.enabled", "true");
+    DaemonOverrides overrides;
+    overrides.source = "synthetic:corridor";
+    return runToEnd(config, overrides);
+  };
+  const DaemonSummary summary = plainCorridor(true);
+  EXPECT_EQ(summary.poses_published, 90u);
+  EXPECT_EQ(summary.errors, 0u);
+  EXPECT_GE(summary.corridor_mode_switched_on, 1u);
+  EXPECT_GE(summary.corridor_mode_frames, 10u);
+  EXPECT_GE(summary.plane_increments_fused, 5u);
+  EXPECT_GT(summary.plane_increments_mean_nis, 0.0);
+
+  // Switched off (the default), nothing of it runs.
+  const DaemonSummary without = plainCorridor(false);
+  EXPECT_EQ(without.poses_published, 90u);
+  EXPECT_EQ(without.corridor_mode_switched_on, 0u);
+  EXPECT_EQ(without.plane_increments_fused, 0u);
+}
+
 TEST_F(DaemonInProcess, SummarySaysPlainlyWhenTrackingIsLostAtTheEnd) {
   // The lens is covered from 1 s (frame 30) to the end: tracking has nothing to measure.
   Config config = smallSyntheticConfig(60);

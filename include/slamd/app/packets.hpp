@@ -9,6 +9,7 @@
 // stage_steps.hpp).
 
 #include <cstdint>
+#include <memory>
 #include <optional>
 
 #include "slamd/common/pose_estimate.hpp"
@@ -16,6 +17,7 @@
 #include "slamd/filter/pose_ekf.hpp"
 #include "slamd/filter/vanishing_point_detector.hpp"
 #include "slamd/filter/vanishing_point_filter.hpp"
+#include "slamd/planes/plane_segmenter.hpp"
 #include "slamd/tracking/visual_odometry.hpp"
 
 namespace slamd {
@@ -27,6 +29,13 @@ struct CapturePacket {
   bool isHeartbeat() const { return !frame; }
 };
 
+/// plane-segmentation thread -> filter thread: one per frame; the frame's planes only in the
+/// corridor mode.
+struct PlaneSegmentationPacket {
+  Utime utime = 0;                                          ///< capture time of the frame
+  std::shared_ptr<const planes::PlaneSegmentation> planes;  ///< null: not segmented
+};
+
 /// tracking -> filter
 struct TrackedPacket {
   RgbdFramePtr frame;                      ///< null: heartbeat
@@ -35,6 +44,8 @@ struct TrackedPacket {
   /// tracking; joined to the packet by the filter thread (empty when that thread is off or its
   /// result was late).
   std::optional<VanishingPoint> vanishing_point;
+  /// The frame's planes (the corridor mode), joined the same way.
+  std::optional<PlaneSegmentationPacket> plane_segmentation;
   std::uint64_t reset_epoch = 0;
   bool isHeartbeat() const { return !frame; }
 };

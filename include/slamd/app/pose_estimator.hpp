@@ -10,8 +10,22 @@
 // last measured frame (plus the measurement): the covariance the loss accumulated is dropped, so
 // that no later correction (a vanishing point) can swing a pose that is known again.
 //
+// The corridor mode (filter.planes.*, issue 23 item 4): a frame tracked with fewer than
+// corridor_min_inliers inliers (or by dense alignment, or not measured at all) switches it on;
+// corridor_exit_frames frames in a row with enough inliers switch it off. While it is on, the
+// plane-segmentation thread segments each frame into planes; here each frame's planes are
+// registered against the previous frame's by plane ICP (planes::registerPlanes, from tracking's
+// increment), and the plane increment is fused with tracking's by information (fuseMotion)
+// before the EKF's prediction: what the planes measure (across a corridor) comes from them, what
+// they leave free (along it) stays tracking's. Unless filter.planes.fuse_rotation, only their
+// translation is fused, the rotation marginalised out. An increment that disagrees with
+// tracking's beyond the gate is not fused (counted).
+//
 // No threads inside; owned by the filter thread. process() never throws on bad data.
 
+#include <atomic>
+#include <cstdint>
+#include <memory>
 #include <optional>
 
 #include "slamd/app/packets.hpp"
@@ -19,6 +33,18 @@
 #include "slamd/filter/vanishing_point_filter.hpp"
 
 namespace slamd {
+
+/// The corridor mode's counts: written by the filter thread, read by any.
+struct CorridorModeStats {
+  std::atomic<bool> on{false};
+  std::atomic<std::uint64_t> switched_on{0};    ///< times the mode came on
+  std::atomic<std::uint64_t> frames{0};         ///< frames filtered with the mode on
+  std::atomic<std::uint64_t> fused{0};          ///< plane increments fused
+  std::atomic<std::uint64_t> gated{0};          ///< plane increments too far from tracking's
+  std::atomic<std::uint64_t> unmatched{0};      ///< measured over another interval than tracking's
+  std::atomic<std::uint64_t> nis_sum_milli{0};  ///< sum of the fused increments' NIS x 1000
+  std::atomic<std::uint64_t> registrations_failed{0};  ///< plane ICP failed
+};
 
 /// Where the filter's vanishing points come from.
 enum class VanishingPointSource {
@@ -34,8 +60,17 @@ class PoseEstimator {
   EstimatedPacket process(TrackedPacket packet);
   /// Forgets the state (RESET command); the next frame starts again at the identity.
   void reset();
+  bool corridorModeOn() const { return corridor_.on.load(std::memory_order_relaxed); }
+  const CorridorModeStats& corridorMode() const { return corridor_; }
 
  private:
+  /// Updates the corridor mode from this frame's tracking.
+  void updateCorridorMode(const OdometryResult& odometry);
+  /// Registers the frame's planes against the previous frame's and fuses the plane increment
+  /// into input (the filter's increment), when the two frames are tracking's interval.
+  void fusePlaneOdometry(const planes::PlaneSegmentation& planes, const OdometryResult& odometry,
+                         const CameraIntrinsics& intrinsics, FilterInput& input);
+
   FilterConfig config_;
   VanishingPointSource vanishing_point_source_;
   std::optional<VanishingPointFilter> filter_;  ///< created at the first frame (intrinsics)
@@ -44,6 +79,13 @@ class PoseEstimator {
   std::optional<Matrix6d> covariance_last_measured_;
   Utime last_utime_ = 0;
   std::int64_t sequence_ = 0;
+  CorridorModeStats corridor_;
+  struct FramePlanes {
+    Utime utime = 0;
+    std::shared_ptr<const planes::PlaneSegmentation> planes;
+  };
+  std::optional<FramePlanes> previous_planes_;  ///< the previous frame's, when segmented
+  int frames_with_features_ = 0;                ///< in a row, while the corridor mode is on
 };
 
 }  // namespace slamd

@@ -107,6 +107,16 @@ struct DaemonSummary {
   double end_to_end_p50_ms = 0.0;
   double end_to_end_p95_ms = 0.0;
   double end_to_end_p99_ms = 0.0;
+  // The corridor mode (filter.planes): times it came on, frames filtered with it on, and the
+  // plane increments fused, gated (too far from tracking's), measured over another interval, and
+  // the fused ones' mean NIS; plane registrations that failed.
+  std::uint64_t corridor_mode_switched_on = 0;
+  std::uint64_t corridor_mode_frames = 0;
+  std::uint64_t plane_increments_fused = 0;
+  std::uint64_t plane_increments_gated = 0;
+  std::uint64_t plane_increments_unmatched = 0;
+  double plane_increments_mean_nis = 0.0;
+  std::uint64_t plane_registrations_failed = 0;
   /// Capture-to-pose latency of each minute of the run (the last one may be shorter).
   std::vector<LatencyWindow> end_to_end_by_minute;
 };

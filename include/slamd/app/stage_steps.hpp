@@ -209,15 +209,61 @@ class TrackingStep : public StepBase {
   std::atomic<std::uint64_t> dense_aligned_frames_{0};
 };
 
-// --- vanishing points (parallel to tracking) ---------------------------------------------------
+// --- steps parallel to tracking (vanishing points, plane odometry) ------------------------------
 
-/// Vanishing-point step (producer) -> filter step (consumer), in frame order.
-struct VanishingPointChannel {
-  SpscQueue<VanishingPointPacket> queue{256};
+/// A step parallel to tracking (producer) -> the filter step (consumer): one result per frame, in
+/// frame order.
+template <typename Packet>
+struct FrameResultChannel {
+  SpscQueue<Packet> queue{256};
   WakeSignal ready;
-  std::atomic<std::uint64_t> late{0};        ///< detections the filter gave up waiting for
-  std::atomic<std::uint64_t> overflowed{0};  ///< detections that found the queue full
+  std::atomic<std::uint64_t> late{0};        ///< results the filter gave up waiting for
+  std::atomic<std::uint64_t> overflowed{0};  ///< results that found the queue full
+
+  void push(Packet packet) {
+    if (!queue.tryPush(std::move(packet))) overflowed.fetch_add(1, std::memory_order_relaxed);
+    ready.notify();
+  }
 };
+
+/// The filter step's end of a FrameResultChannel: joins a frame's result to the tracked frame by
+/// capture time (Packet::utime).
+template <typename Packet>
+class FrameResultJoin {
+ public:
+  FrameResultJoin(FrameResultChannel<Packet>* channel, std::chrono::microseconds wait)
+      : channel_(channel), wait_(wait) {}
+
+  bool connected() const { return channel_ != nullptr; }
+  /// The result of the frame captured at `utime`, waiting up to the wait for it; nullopt when it
+  /// is late, or was dropped (a result of a later frame is already there), counted as late.
+  std::optional<Packet> take(Utime utime) {
+    FrameResultChannel<Packet>& channel = *channel_;
+    const auto deadline = std::chrono::steady_clock::now() + wait_;
+    while (true) {
+      const auto seen = channel.ready.epoch();
+      if (!held_) held_ = channel.queue.tryPop();
+      // Results of frames tracking skipped are passed over.
+      while (held_ && held_->utime < utime) held_ = channel.queue.tryPop();
+      if (held_ && held_->utime == utime) {
+        std::optional<Packet> result = std::move(held_);
+        held_.reset();
+        return result;
+      }
+      if (held_) break;  // the next result is of a later frame: this frame's was dropped
+      if (!channel.ready.waitFor(seen, deadline)) break;
+    }
+    channel.late.fetch_add(1, std::memory_order_relaxed);
+    return std::nullopt;
+  }
+
+ private:
+  FrameResultChannel<Packet>* channel_;
+  std::chrono::microseconds wait_;
+  std::optional<Packet> held_;  ///< a result of a later frame
+};
+
+using VanishingPointChannel = FrameResultChannel<VanishingPointPacket>;
 
 /// Detects each frame's vanishing point in parallel with tracking; the filter step joins it to
 /// the tracked frame by capture time.
@@ -241,27 +287,55 @@ class VanishingPointStep : public StepBase {
   std::optional<VanishingPointDetector> detector_;  ///< created at the first frame (intrinsics)
 };
 
+/// Plane segmentation (the corridor mode, filter.planes.*) -> filter step; the filter step sets
+/// corridor_mode, the plane-segmentation step reads it.
+struct PlaneSegmentationChannel : FrameResultChannel<PlaneSegmentationPacket> {
+  std::atomic<bool> corridor_mode{false};
+};
+
+/// While the filter has the corridor mode on, segments each frame into planes (paper 000) for the
+/// filter's plane ICP; otherwise passes frames through unsegmented (the filter still gets one
+/// packet per frame, so it never waits for nothing). In parallel with tracking: the segmentation,
+/// the mode's costly part, adds no time to the capture-to-pose path beyond the join.
+class PlaneSegmentationStep : public StepBase {
+ public:
+  PlaneSegmentationStep(PlaneSegmentationChannel& channel) : channel_(channel) {}
+
+  void process(CapturePacket packet);
+  /// The segmenter keeps nothing from one frame to the next.
+  void reset() override {}
+  /// Frames segmented so far (any thread).
+  std::uint64_t segmented() const { return segmented_.load(std::memory_order_relaxed); }
+
+ private:
+  PlaneSegmentationChannel& channel_;
+  planes::PlaneSegmenter segmenter_;
+  std::atomic<std::uint64_t> segmented_{0};
+};
+
 // --- filter ----------------------------------------------------------------------------------
 
 /// The pose filter (PoseEstimator), fed the vanishing point of each frame when the vanishing-
-/// point step runs.
+/// point step runs, and its plane odometry when the plane-odometry step runs.
 class FilterStep : public StepBase {
  public:
   /// `vanishing_points`: null when the filter detects them itself (or not at all);
-  /// `vanishing_point_wait`: how long to wait for a frame's detection.
+  /// `result_wait`: how long to wait for a frame's detection or plane odometry;
+  /// `plane_segmentation`: null without the corridor mode.
   FilterStep(const FilterConfig& config, VanishingPointChannel* vanishing_points,
-             std::chrono::microseconds vanishing_point_wait);
+             std::chrono::microseconds result_wait,
+             PlaneSegmentationChannel* plane_segmentation = nullptr);
 
   std::optional<EstimatedPacket> process(TrackedPacket packet);
   void reset() override { estimator_.reset(); }
+  /// The corridor mode's counts (any thread).
+  const CorridorModeStats& corridorMode() const { return estimator_.corridorMode(); }
 
  private:
-  std::optional<VanishingPoint> takeVanishingPoint(Utime utime);
-
   PoseEstimator estimator_;
-  VanishingPointChannel* vanishing_points_;
-  std::chrono::microseconds vanishing_point_wait_;
-  std::optional<VanishingPointPacket> held_;  ///< a detection of a later frame
+  FrameResultJoin<VanishingPointPacket> vanishing_points_;
+  FrameResultJoin<PlaneSegmentationPacket> plane_segmentation_;
+  PlaneSegmentationChannel* plane_channel_;
 };
 
 // --- publish ---------------------------------------------------------------------------------

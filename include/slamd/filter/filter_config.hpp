@@ -56,6 +56,30 @@ struct VanishingPointConfig {
   static VanishingPointConfig load(Config& config);
 };
 
+/// The corridor mode, keys `filter.planes.*` (issue 23 item 4): where features run out, plane
+/// ICP between consecutive frames (planes::registerPlanes, on its own thread) is fused with
+/// tracking's increment by information before the EKF's prediction (filter/motion_fusion.hpp).
+struct PlaneOdometryConfig {
+  /// Off: on slamd's own plain corridors, where features and dense alignment already hold the
+  /// pose to 1-2 cm, the fused plane increments made held-out seeds worse (docs/planes.md).
+  bool enabled = false;
+  /// Below this many inliers a frame has "run out of features"; the keyframe rule's
+  /// few-inlier threshold, so fr1/xyz and textured corridors (hundreds) never switch the mode on.
+  int corridor_min_inliers = 50;
+  int corridor_exit_frames = 30;
+  /// Plane ICP takes its samples as independent, so its information overstates what it knows.
+  double information_scale = 0.1;
+  double gate_probability = 0.999;
+  int points_per_plane = 200;
+  /// Off: only the translation the planes measure is fused, their rotation marginalised out. A
+  /// door that grows into its wall's plane tilts it by up to a degree (docs/planes.md), a bias no
+  /// gate sees, while vanishing points and features measure the rotation without it.
+  bool fuse_rotation = false;
+
+  static const ConfigSchema<PlaneOdometryConfig>& schema();
+  static PlaneOdometryConfig load(Config& config);
+};
+
 /// Pose EKF and filter-stage options, keys `filter.*`.
 struct FilterConfig {
   bool enabled = true;
@@ -104,10 +128,11 @@ struct FilterConfig {
 
   VanishingPointConfig vp;
   SurfaceAxesConfig axes;
+  PlaneOdometryConfig planes;
 
   /// The `filter.*` keys of the EKF (vp and axes have their own tables).
   static const ConfigSchema<FilterConfig>& schema();
-  /// Reads `filter.*`, `filter.vp.*` and `filter.axes.*`; throws ConfigError.
+  /// Reads `filter.*`, `filter.vp.*`, `filter.axes.*` and `filter.planes.*`; throws ConfigError.
   static FilterConfig load(Config& config);
 };
 
