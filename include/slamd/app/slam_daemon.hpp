@@ -16,7 +16,8 @@
 // wires them in one table (stage, input, edge capacity and policy, thread niceness).
 //
 // Threads: one per stage, owned by the pipeline (the back end with backend.enabled; vanishing-point
-// detection with daemon.vanishing_point_thread and the filter on); the LCM bus has its own receive
+// detection with daemon.vanishing_point_thread and the filter on; plane segmentation for the
+// corridor mode with filter.planes.enabled and the filter on); the LCM bus has its own receive
 // thread (commands only: it pushes them into a queue); the calling thread runs the control loop
 // (commands, 1 Hz status) and, after the pipeline has stopped, writes outputs. RESET travels
 // through the queues with the frames, so every stage resets at the same point of the stream.
