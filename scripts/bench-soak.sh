@@ -76,7 +76,7 @@ echo "soak: $FRAMES frames ($LAPS laps of fr1/xyz, ${LAP_SECONDS} s each) in rea
 # --- the run --------------------------------------------------------------------------------------
 soak_run() {
   cd "$OUT"
-  rm -f soak.lcmlog rss.tsv trajectory.txt metrics.json
+  rm -f soak.lcmlog rss.tsv threads.tsv threads.prev trajectory.txt metrics.json
   lcm-logger --quiet --channel='SLAMD_STATUS' soak.lcmlog > logger.txt 2>&1 &
   local logger=$!
   local sets=(--set capture.pacing.mode=realtime --set backend.enabled=true)
@@ -93,6 +93,10 @@ soak_run() {
   local ticks cores prev_busy=0 prev_total=0 prev_slamd=0 prev_ns=$start_ns
   ticks=$(getconf CLK_TCK)
   cores=$(nproc)
+  # And each of slamd's threads (the pipeline names them slamd:STAGE): which ones ran together
+  # in a slow second.
+  echo -e "t_s\ttid\tthread\tcores" > threads.tsv
+  : > threads.prev
   while kill -0 $slamd 2> /dev/null; do
     local rss_kb now_ns busy total slamd_ticks
     rss_kb=$(awk '/^VmRSS:/ { print $2 }' "/proc/$slamd/status" 2> /dev/null || true)
@@ -108,6 +112,18 @@ soak_run() {
             own = (dt > 0 && ps > 0) ? (s - ps) / hz / (dt * 1e-9) : 0
             printf "%se-3\t%s\t%.3f\t%.3f\n", t, rss, machine, own }' >> rss.tsv
     fi
+    awk -v t="$(( (now_ns - start_ns) / 1000000 ))" -v hz="$ticks" \
+        -v dt="$(awk -v a="$now_ns" -v b="$prev_ns" 'BEGIN { print (a - b) * 1e-9 }')" '
+      FNR == NR { previous[$1] = $2; next }
+      {
+        name = $0; sub(/^[^(]*\(/, "", name); sub(/\)[^)]*$/, "", name); gsub(/[ \t]/, "_", name)
+        rest = $0; sub(/^.*\) /, "", rest); split(rest, field, " ")
+        used = field[12] + field[13]
+        print $1, used > "threads.prev.new"
+        if (($1 in previous) && dt > 0)
+          printf "%se-3\t%s\t%s\t%.3f\n", t, $1, name, (used - previous[$1]) / hz / dt >> "threads.tsv"
+      }' threads.prev /proc/$slamd/task/*/stat 2> /dev/null || true
+    [ -f threads.prev.new ] && mv threads.prev.new threads.prev
     prev_busy=$busy prev_total=$total prev_slamd=$slamd_ticks prev_ns=$now_ns
     sleep 1
   done

@@ -31,6 +31,20 @@ def read_rss(path):
     return series, cpu
 
 
+def read_threads(path):
+    """{second (int): {thread name: cores}} from threads.tsv (empty when absent)."""
+    by_second = {}
+    if not os.path.exists(path):
+        return by_second
+    with open(path) as f:
+        next(f)
+        for line in f:
+            t_s, _, name, cores = line.rstrip("\n").split("\t")
+            second = by_second.setdefault(int(round(float(t_s))), {})
+            second[name] = second.get(name, 0.0) + float(cores)
+    return by_second
+
+
 def read_status(path):
     """One record per status message: its own fields plus each stage's p99 and processed count."""
     by_utime = {}
@@ -125,6 +139,7 @@ def main():
     args = parser.parse_args()
 
     rss, cpu = read_rss(os.path.join(args.out, "rss.tsv"))
+    threads = read_threads(os.path.join(args.out, "threads.tsv"))
     status = read_status(os.path.join(args.out, "status.csv"))
     with open(os.path.join(args.out, "ate.json")) as f:
         ate = json.load(f)
@@ -181,6 +196,23 @@ def main():
         m["end_to_end_frames"] = by_minute["frames"]
     minute_p99s = [m["end_to_end_p99_ms"] for m in minutes if m["end_to_end_p99_ms"] is not None]
 
+    # The seconds over the target, with what each of slamd's threads used in them (the samples
+    # nearest in time: the status and CPU clocks start within a second of each other).
+    slow_seconds = []
+    for r in status:
+        if r["end_to_end_p99_ms"] <= 33.0:
+            continue
+        nearest = min(threads, key=lambda s: abs(s - r["t_s"])) if threads else None
+        slow_seconds.append({
+            "t_s": r["t_s"],
+            "end_to_end_p50_ms": r["end_to_end_p50_ms"],
+            "end_to_end_p99_ms": r["end_to_end_p99_ms"],
+            "stage_p99_ms": r["stage_p99_ms"],
+            "thread_cores": ({k: round(v, 3) for k, v in sorted(threads[nearest].items(),
+                                                                 key=lambda kv: -kv[1]) if v > 0}
+                             if nearest is not None else None),
+        })
+
     lap2 = laps[1] if len(laps) >= 2 else None
     last = laps[-1] if laps else None
     summary = {
@@ -199,6 +231,7 @@ def main():
                         ("end_to_end_p50_ms", "end_to_end_p99_ms", "frames_dropped_before_tracking")
                         if k in metrics},
         "laps_detail": laps,
+        "slow_seconds": slow_seconds,
         "minutes": minutes,
         "series": {
             "rss_mb": rss,
@@ -249,6 +282,11 @@ def main():
               f"{show(m['mapping_p99_ms_max_of_seconds'], '{:.0f}')} ms; back end p99 max "
               f"{show(m['backend_p99_ms_max_of_seconds'], '{:.0f}')} ms; cores busy: machine max "
               f"{show(m['machine_busy_cores_max'], '{:.2f}')}, slamd mean {show(m['slamd_cores_mean'], '{:.2f}')}")
+    for second in slow_seconds:
+        cores = second["thread_cores"]
+        print(f"  slow second at {second['t_s']:6.1f} s: capture-to-pose p50/p99 "
+              f"{second['end_to_end_p50_ms']:.1f}/{second['end_to_end_p99_ms']:.1f} ms; threads (cores): "
+              + (", ".join(f"{k} {v:.2f}" for k, v in cores.items()) if cores else "n/a"))
     print(f"soak: wrote {os.path.join(args.out, 'soak.json')} and {os.path.join(args.out, 'soak.svg')}")
 
 
