@@ -133,7 +133,6 @@ void PlaneSegmentationStep::process(CapturePacket packet) {
       auto planes = std::make_shared<planes::PlaneSegmentation>(segmenter_.segment(*packet.frame));
       planes->labels = planes->labels.clone();  // the segmenter reuses its buffer
       out.planes = std::move(planes);
-      segmented_.fetch_add(1, std::memory_order_relaxed);
     } catch (...) {
       // A frame the segmenter refuses (wrong sizes or types): the filter still gets its packet,
       // unsegmented; the pipeline counts the error.

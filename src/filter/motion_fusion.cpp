@@ -63,18 +63,13 @@ MotionFusionResult fuseMotion(const SE3& T_prev_curr, const Matrix6d& covariance
   const double largest = eigen.eigenvalues().maxCoeff();
   if (!(largest > 0.0)) return result;
   // Directions with less than 1e-9 of the best one's information are not measured (the
-  // registration already set its degenerate directions to zero; this catches round-off).
-  Eigen::Matrix<double, 6, Eigen::Dynamic> U(6, 0);
-  Eigen::VectorXd eigenvalues(0);
-  for (int i = 0; i < 6; ++i) {
-    if (eigen.eigenvalues()(i) > 1e-9 * largest) {
-      U.conservativeResize(Eigen::NoChange, U.cols() + 1);
-      U.col(U.cols() - 1) = eigen.eigenvectors().col(i);
-      eigenvalues.conservativeResize(eigenvalues.size() + 1);
-      eigenvalues(eigenvalues.size() - 1) = eigen.eigenvalues()(i);
-    }
-  }
-  result.measured_directions = static_cast<int>(U.cols());
+  // registration already set its degenerate directions to zero; this catches round-off). The
+  // eigenvalues come in increasing order, so the measured ones are the last columns.
+  int first_measured = 0;
+  while (eigen.eigenvalues()(first_measured) <= 1e-9 * largest) ++first_measured;
+  result.measured_directions = 6 - first_measured;
+  const auto U = eigen.eigenvectors().rightCols(result.measured_directions);
+  const Eigen::VectorXd eigenvalues = eigen.eigenvalues().tail(result.measured_directions);
   const Eigen::VectorXd z = U.transpose() * error;
   Eigen::MatrixXd S = U.transpose() * covariance * U;
   S.diagonal() += eigenvalues.cwiseInverse();

@@ -209,7 +209,7 @@ class TrackingStep : public StepBase {
   std::atomic<std::uint64_t> dense_aligned_frames_{0};
 };
 
-// --- steps parallel to tracking (vanishing points, plane odometry) ------------------------------
+// --- steps parallel to tracking (vanishing points, plane segmentation) --------------------------
 
 /// A step parallel to tracking (producer) -> the filter step (consumer): one result per frame, in
 /// frame order.
@@ -304,23 +304,20 @@ class PlaneSegmentationStep : public StepBase {
   void process(CapturePacket packet);
   /// The segmenter keeps nothing from one frame to the next.
   void reset() override {}
-  /// Frames segmented so far (any thread).
-  std::uint64_t segmented() const { return segmented_.load(std::memory_order_relaxed); }
 
  private:
   PlaneSegmentationChannel& channel_;
   planes::PlaneSegmenter segmenter_;
-  std::atomic<std::uint64_t> segmented_{0};
 };
 
 // --- filter ----------------------------------------------------------------------------------
 
 /// The pose filter (PoseEstimator), fed the vanishing point of each frame when the vanishing-
-/// point step runs, and its plane odometry when the plane-odometry step runs.
+/// point step runs, and its planes when the plane-segmentation step runs.
 class FilterStep : public StepBase {
  public:
   /// `vanishing_points`: null when the filter detects them itself (or not at all);
-  /// `result_wait`: how long to wait for a frame's detection or plane odometry;
+  /// `result_wait`: how long to wait for a frame's detection or planes;
   /// `plane_segmentation`: null without the corridor mode.
   FilterStep(const FilterConfig& config, VanishingPointChannel* vanishing_points,
              std::chrono::microseconds result_wait,

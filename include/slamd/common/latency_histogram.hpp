@@ -79,7 +79,6 @@ class WindowedLatency {
   void finish(std::int64_t now_ns, const std::vector<std::uint64_t>& snapshot);
 
   const std::vector<LatencyWindow>& windows() const { return windows_; }
-  double windowS() const { return window_s_; }
 
  private:
   void close(std::int64_t now_ns, const std::vector<std::uint64_t>& snapshot);
