@@ -17,7 +17,9 @@ void PoseEstimator::reset() {
   last_utime_ = 0;
   corridor_.on.store(false, std::memory_order_relaxed);
   frames_with_features_ = 0;
+  plane_anchors_.clear();
   previous_planes_.reset();
+  previous_reference_pose_.reset();
 }
 
 void PoseEstimator::updateCorridorMode(const OdometryResult& odometry) {
@@ -42,42 +44,96 @@ void PoseEstimator::updateCorridorMode(const OdometryResult& odometry) {
   }
 }
 
-void PoseEstimator::fusePlaneOdometry(const planes::PlaneSegmentation& planes,
-                                      const OdometryResult& odometry,
-                                      const CameraIntrinsics& intrinsics, FilterInput& input) {
-  if (!previous_planes_) return;
-  if (previous_planes_->utime != odometry.prev_utime) {
+void PoseEstimator::fusePlaneOdometry(
+    const std::shared_ptr<const planes::PlaneSegmentation>& planes, const OdometryResult& odometry,
+    const CameraIntrinsics& intrinsics, FilterInput& input) {
+  // (The first frame has no motion to fuse: it only defines the world frame.)
+  const bool measured =
+      odometry.tracking_state == TrackingState::kOk && odometry.ref_utime > 0 && last_utime_ > 0;
+  if (!planes || !measured) {
+    previous_reference_pose_.reset();
+    previous_planes_.reset();
+    // A keyframe is a reference whatever measured it (the first frame of a segment too).
+    if (planes && odometry.is_keyframe) {
+      plane_anchors_.push_back(PlaneAnchor{odometry.utime, 0, SE3::Identity(), planes});
+      if (plane_anchors_.size() > kMaxPlaneAnchors) plane_anchors_.pop_front();
+    }
+    return;
+  }
+  const Utime ref_utime = odometry.ref_utime;
+  // The anchor: the reference itself when it was segmented, else the first segmented frame
+  // measured from it, whose pose relative to the reference is known.
+  const PlaneAnchor* anchor = nullptr;
+  SE3 T_ref_anchor = SE3::Identity();
+  if (previous_planes_ && previous_planes_->utime == ref_utime) anchor = &*previous_planes_;
+  for (const PlaneAnchor& candidate : plane_anchors_) {
+    if (anchor) break;
+    if (candidate.utime == ref_utime) anchor = &candidate;
+  }
+  for (const PlaneAnchor& candidate : plane_anchors_) {
+    if (anchor) break;
+    if (candidate.ref_utime == ref_utime) {
+      anchor = &candidate;
+      T_ref_anchor = candidate.T_ref_frame;
+    }
+  }
+  const bool reference_has_anchor = anchor != nullptr;
+
+  SE3 T_ref_curr = odometry.T_ref_curr;
+  bool fused = false;
+  if (!anchor) {
     corridor_.unmatched.fetch_add(1, std::memory_order_relaxed);
-    return;
+  } else {
+    planes::IcpParams params;
+    params.points_per_plane = config_.planes.points_per_plane;
+    // The current frame's planes are the source, the anchor's the target; tracking's estimate
+    // is the starting point (at a turn the identity can be several centimetres off at the
+    // walls, beyond where the associations converge).
+    const planes::IcpResult icp = planes::registerPlanes(
+        *planes, *anchor->planes, intrinsics, T_ref_anchor.inverse() * odometry.T_ref_curr, params);
+    if (!icp.ok) {
+      corridor_.registrations_failed.fetch_add(1, std::memory_order_relaxed);
+    } else {
+      // The information is of a right perturbation of T_anchor_curr, which is also one of
+      // T_ref_anchor * T_anchor_curr.
+      Matrix6d information = icp.information * config_.planes.information_scale;
+      if (!config_.planes.fuse_rotation) information = translationInformation(information);
+      // The EKF scales the odometry covariance by odometry_covariance_scale; fusing against the
+      // scaled one weighs the two as the filter will.
+      const double scale = config_.odometry_covariance_scale;
+      const MotionFusionResult fusion = fuseMotion(
+          odometry.T_ref_curr, odometry.covariance_ref_curr * scale,
+          T_ref_anchor * icp.T_target_source, information, config_.planes.gate_probability);
+      if (fusion.fused) {
+        fused = true;
+        T_ref_curr = fusion.T_prev_curr;
+        input.covariance = fusion.covariance / scale;
+        corridor_.fused.fetch_add(1, std::memory_order_relaxed);
+        corridor_.nis_sum_milli.fetch_add(
+            static_cast<std::uint64_t>(std::lround(fusion.nis * 1000.0)),
+            std::memory_order_relaxed);
+      } else if (fusion.measured_directions > 0) {
+        corridor_.gated.fetch_add(1, std::memory_order_relaxed);
+      }
+    }
   }
-  planes::IcpParams params;
-  params.points_per_plane = config_.planes.points_per_plane;
-  // The current frame's planes are the source: T_target_source is T_prev_curr. Tracking's
-  // increment is the starting point: at a turn the identity can be several centimetres off at
-  // the walls, beyond where the associations converge.
-  const planes::IcpResult icp = planes::registerPlanes(planes, *previous_planes_->planes,
-                                                       intrinsics, input.T_prev_curr, params);
-  if (!icp.ok) {
-    corridor_.registrations_failed.fetch_add(1, std::memory_order_relaxed);
-    return;
+
+  // The increment is the step between the two frames' poses relative to the reference: the
+  // previous frame's as given to the filter when it had the same reference, else tracking's.
+  const bool same_reference = previous_reference_pose_ &&
+                              previous_reference_pose_->utime == odometry.prev_utime &&
+                              previous_reference_pose_->ref_utime == ref_utime;
+  const SE3 T_ref_prev = same_reference ? previous_reference_pose_->T_ref_frame
+                                        : odometry.T_ref_curr * odometry.T_prev_curr.inverse();
+  if (fused || same_reference) input.T_prev_curr = normalizedSE3(T_ref_prev.inverse() * T_ref_curr);
+  previous_reference_pose_ = ReferencePose{odometry.utime, ref_utime, T_ref_curr};
+
+  PlaneAnchor self{odometry.utime, ref_utime, T_ref_curr, planes};
+  if (odometry.is_keyframe || !reference_has_anchor) {
+    plane_anchors_.push_back(self);
+    if (plane_anchors_.size() > kMaxPlaneAnchors) plane_anchors_.pop_front();
   }
-  Matrix6d information = icp.information * config_.planes.information_scale;
-  if (!config_.planes.fuse_rotation) information = translationInformation(information);
-  // The EKF scales the odometry covariance by odometry_covariance_scale; fusing against the
-  // scaled one weighs the two as the filter will.
-  const double scale = config_.odometry_covariance_scale;
-  const MotionFusionResult fused =
-      fuseMotion(input.T_prev_curr, input.covariance * scale, icp.T_target_source, information,
-                 config_.planes.gate_probability);
-  if (!fused.fused) {
-    if (fused.measured_directions > 0) corridor_.gated.fetch_add(1, std::memory_order_relaxed);
-    return;
-  }
-  input.T_prev_curr = fused.T_prev_curr;
-  input.covariance = fused.covariance / scale;
-  corridor_.fused.fetch_add(1, std::memory_order_relaxed);
-  corridor_.nis_sum_milli.fetch_add(static_cast<std::uint64_t>(std::lround(fused.nis * 1000.0)),
-                                    std::memory_order_relaxed);
+  previous_planes_ = std::move(self);
 }
 
 EstimatedPacket PoseEstimator::process(TrackedPacket packet) {
@@ -98,13 +154,9 @@ EstimatedPacket PoseEstimator::process(TrackedPacket packet) {
   input.covariance = last_utime_ > 0 ? odometry.covariance : Matrix6d::Identity() * 1e-12;
   input.dt_s = last_utime_ > 0 ? utimeToSeconds(odometry.utime - last_utime_) : 0.0;
   updateCorridorMode(odometry);
-  if (config_.planes.enabled && packet.plane_segmentation && packet.plane_segmentation->planes) {
-    if (last_utime_ > 0 && odometry.tracking_state != TrackingState::kRelocalized) {
-      fusePlaneOdometry(*packet.plane_segmentation->planes, odometry, frame.intrinsics, input);
-    }
-    previous_planes_ = FramePlanes{odometry.utime, packet.plane_segmentation->planes};
-  } else {
-    previous_planes_.reset();
+  if (config_.planes.enabled) {
+    fusePlaneOdometry(packet.plane_segmentation ? packet.plane_segmentation->planes : nullptr,
+                      odometry, frame.intrinsics, input);
   }
   // (A covariance of the last measured frame implies an earlier frame: last_utime_ > 0.)
   if (odometry.tracking_state == TrackingState::kRelocalized && covariance_last_measured_) {

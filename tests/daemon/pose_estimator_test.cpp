@@ -154,3 +154,113 @@ TEST_F(PoseEstimatorCorridorMode, DisabledItNeverSwitchesOn) {
 
 }  // namespace
 }  // namespace slamd
+
+#include "plain_corridor.hpp"
+#include "slamd/planes/plane_segmenter.hpp"
+
+namespace slamd {
+namespace {
+
+// The corridor mode's fusion: each frame's planes are registered against the planes of the
+// frame tracking measured it from (or the first segmented frame measured from it), so a plane
+// error is the reference's and does not add up frame by frame.
+class PoseEstimatorPlaneFusion : public ::testing::Test {
+ protected:
+  static constexpr Utime kFirstUtime = 1'000'000;
+  static constexpr Utime kFrameUs = 33'333;
+  static constexpr int kFrames = 12;
+
+  /// Tracking's T_ref_curr for frame k (k = 0 is the keyframe): the true motion along the
+  /// corridor (z), 2 cm a frame, off across it (x, y) by errors that change sign from frame to
+  /// frame, and along it by a constant 5 mm.
+  static SE3 trackedFromKeyframe(int k) {
+    SE3 T = SE3::Identity();
+    if (k == 0) return T;
+    const double sign = (k % 2 == 0) ? 1.0 : -1.0;
+    T.translation() = Eigen::Vector3d(0.015 * sign, -0.01 * sign, 0.02 * k + 0.005);
+    return T;
+  }
+  static SE3 trueFromKeyframe(int k) { return SE3(Eigen::Translation3d(0.0, 0.0, 0.02 * k)); }
+
+  /// Frame k as tracking measured it against frame 0, its planes when `segmented`.
+  TrackedPacket frame(int k, bool segmented) {
+    const SE3 T_world_true = trueFromKeyframe(k);
+    auto frame = std::make_shared<RgbdFrame>(test::renderCorridor(T_world_true));
+    frame->utime = kFirstUtime + k * kFrameUs;
+    TrackedPacket packet;
+    OdometryResult odometry;
+    odometry.utime = frame->utime;
+    odometry.prev_utime = frame->utime - kFrameUs;
+    odometry.tracking_state = TrackingState::kOk;
+    odometry.status = OdometryStatus::kOk;
+    odometry.is_keyframe = k == 0;
+    odometry.ref_utime = k == 0 ? 0 : kFirstUtime;
+    odometry.T_ref_curr = trackedFromKeyframe(k);
+    odometry.T_prev_curr =
+        k == 0 ? SE3::Identity() : trackedFromKeyframe(k - 1).inverse() * trackedFromKeyframe(k);
+    // 2 cm a direction (the errors above are within it), rotation well known.
+    Matrix6d covariance = Matrix6d::Identity() * 4e-4;
+    covariance.bottomRightCorner<3, 3>() = Eigen::Matrix3d::Identity() * 1e-8;
+    odometry.covariance = covariance;
+    odometry.covariance_ref_curr = covariance;
+    odometry.stats.num_inliers = 20;  // features have run out: the mode comes on
+    if (segmented) {
+      PlaneSegmentationPacket planes;
+      planes.utime = frame->utime;
+      planes.planes = std::make_shared<planes::PlaneSegmentation>(segmenter_.segment(*frame));
+      packet.plane_segmentation = planes;
+    }
+    packet.frame = std::move(frame);
+    packet.odometry = odometry;
+    return packet;
+  }
+
+  static FilterConfig withCorridorMode() {
+    FilterConfig config;
+    config.planes.enabled = true;
+    return config;
+  }
+
+  planes::PlaneSegmenter segmenter_;
+  PoseEstimator estimator_{withCorridorMode(), VanishingPointSource::kPrecomputed};
+};
+
+TEST_F(PoseEstimatorPlaneFusion, PlanesCorrectWhatTheyMeasureAgainstTheKeyframe) {
+  for (int k = 0; k < kFrames; ++k) {
+    SCOPED_TRACE("frame " + std::to_string(k));
+    const EstimatedPacket out = estimator_.process(frame(k, /*segmented=*/true));
+    const Eigen::Vector3d error =
+        out.pose.T_world_camera.translation() - trueFromKeyframe(k).translation();
+    // Across the corridor the planes hold every frame to the keyframe: tracking was 1-1.5 cm
+    // off there. Along it (z) they measure nothing: tracking's value stays.
+    EXPECT_LT(error.head<2>().norm(), 0.002);
+    EXPECT_NEAR(error.z(), k == 0 ? 0.0 : 0.005, 0.002);
+  }
+  EXPECT_EQ(estimator_.corridorMode().fused.load(), static_cast<std::uint64_t>(kFrames - 1));
+  EXPECT_EQ(estimator_.corridorMode().gated.load(), 0u);
+}
+
+TEST_F(PoseEstimatorPlaneFusion, WithoutTheKeyframesPlanesTheFirstSegmentedFrameIsTheAnchor) {
+  // The mode came on after the keyframe: frames 0-2 are not segmented, frame 3 is the first.
+  constexpr int kAnchor = 3;
+  const Eigen::Vector3d anchor_error =
+      trackedFromKeyframe(kAnchor).translation() - trueFromKeyframe(kAnchor).translation();
+  for (int k = 0; k < kFrames; ++k) {
+    SCOPED_TRACE("frame " + std::to_string(k));
+    const EstimatedPacket out = estimator_.process(frame(k, /*segmented=*/k >= kAnchor));
+    const Eigen::Vector3d error =
+        out.pose.T_world_camera.translation() - trueFromKeyframe(k).translation();
+    if (k < kAnchor) continue;
+    // Every later frame is registered against the anchor, whose position relative to the
+    // keyframe is tracking's: across the corridor each carries the anchor's error, not a sum.
+    EXPECT_LT((error.head<2>() - anchor_error.head<2>()).norm(), 0.002);
+    EXPECT_NEAR(error.z(), 0.005, 0.002);
+  }
+  EXPECT_EQ(estimator_.corridorMode().fused.load(),
+            static_cast<std::uint64_t>(kFrames - kAnchor - 1));
+  // Only the anchor itself had nothing to be registered against.
+  EXPECT_EQ(estimator_.corridorMode().unmatched.load(), 1u);
+}
+
+}  // namespace
+}  // namespace slamd

@@ -14,6 +14,7 @@
 
 #include <gtest/gtest.h>
 
+#include "plain_corridor.hpp"
 #include "slamd/common/config.hpp"
 #include "slamd/common/trajectory.hpp"
 #include "slamd/synth/synthetic_source.hpp"
@@ -127,51 +128,7 @@ TEST(PlaneRegistration, RecoversTheMotionBetweenRoomFrames) {
 
 // ---------------------------------------------------------------------------------------------
 // A plain corridor: walls, floor and ceiling only, each a flat colour. Planes fix five degrees
-// of freedom; the translation along the corridor is free.
-
-/// The corridor x in [-1, 1], y in [-1.3, 1.2] (y down, optical frame of the first camera),
-/// endless along z, seen from T_world_camera by a 320x240 camera; exact depth.
-RgbdFrame renderCorridor(const SE3& T_world_camera) {
-  RgbdFrame frame;
-  CameraIntrinsics& k = frame.intrinsics;
-  k.fx = k.fy = 262.5;
-  k.cx = 159.5;
-  k.cy = 119.5;
-  k.width = 320;
-  k.height = 240;
-  frame.depth_m.create(k.height, k.width, CV_32FC1);
-  frame.color_bgr.create(k.height, k.width, CV_8UC3);
-  // (axis, bound, colour): the planes x = -1, x = 1, y = -1.3, y = 1.2.
-  const std::array<std::tuple<int, double, cv::Vec3b>, 4> surfaces = {{
-      {0, -1.0, cv::Vec3b(40, 60, 200)},
-      {0, 1.0, cv::Vec3b(200, 80, 40)},
-      {1, -1.3, cv::Vec3b(220, 220, 220)},
-      {1, 1.2, cv::Vec3b(60, 140, 60)},
-  }};
-  const Eigen::Matrix3d R = T_world_camera.linear();
-  const Eigen::Vector3d o = T_world_camera.translation();
-  for (int v = 0; v < k.height; ++v) {
-    for (int u = 0; u < k.width; ++u) {
-      const Eigen::Vector3d ray_camera = k.ray(u, v);
-      const Eigen::Vector3d d = R * ray_camera;
-      double best = std::numeric_limits<double>::infinity();
-      cv::Vec3b colour(0, 0, 0);
-      for (const auto& [axis, bound, surface_colour] : surfaces) {
-        if (d[axis] == 0.0) continue;
-        const double t = (bound - o[axis]) / d[axis];
-        if (t > 0.0 && t < best) {
-          best = t;
-          colour = surface_colour;
-        }
-      }
-      // Depth along the camera's z: the ray has z = 1 in the camera frame.
-      frame.depth_m.at<float>(v, u) =
-          best < 20.0 ? static_cast<float>(best) : std::numeric_limits<float>::quiet_NaN();
-      frame.color_bgr.at<cv::Vec3b>(v, u) = colour;
-    }
-  }
-  return frame;
-}
+// of freedom; the translation along the corridor is free (test::renderCorridor).
 
 TEST(PlaneRegistration, AlongAPlainCorridorTheFreeTranslationIsReportedAndLeftAtTheGuess) {
   const SE3 T_world_source = SE3::Identity();
@@ -179,8 +136,8 @@ TEST(PlaneRegistration, AlongAPlainCorridorTheFreeTranslationIsReportedAndLeftAt
   T_world_target.linear() =
       Eigen::AngleAxisd(2.0 * kPi / 180.0, Eigen::Vector3d::UnitY()).toRotationMatrix();
   T_world_target.translation() = Eigen::Vector3d(0.03, -0.02, 0.20);
-  const RgbdFrame source = renderCorridor(T_world_source);
-  const RgbdFrame target = renderCorridor(T_world_target);
+  const RgbdFrame source = test::renderCorridor(T_world_source);
+  const RgbdFrame target = test::renderCorridor(T_world_target);
   const SE3 T_target_source = T_world_target.inverse() * T_world_source;
   PlaneSegmenter source_segmenter;
   PlaneSegmenter target_segmenter;
@@ -253,7 +210,7 @@ TEST(PlaneRegistration, RecoversTheMotionBetweenTumFr1XyzFrames) {
 // Bad input.
 
 TEST(PlaneRegistration, BadInputGivesAnErrorNotAnEstimate) {
-  const RgbdFrame frame = renderCorridor(SE3::Identity());
+  const RgbdFrame frame = test::renderCorridor(SE3::Identity());
   PlaneSegmenter segmenter;
   const PlaneSegmentation planes = segmenter.segment(frame);
   const CameraIntrinsics& k = frame.intrinsics;

@@ -13,18 +13,24 @@
 // The corridor mode (filter.planes.*, issue 23 item 4): a frame tracked with fewer than
 // corridor_min_inliers inliers (or by dense alignment, or not measured at all) switches it on;
 // corridor_exit_frames frames in a row with enough inliers switch it off. While it is on, the
-// plane-segmentation thread segments each frame into planes; here each frame's planes are
-// registered against the previous frame's by plane ICP (planes::registerPlanes, from tracking's
-// increment), and the plane increment is fused with tracking's by information (fuseMotion)
-// before the EKF's prediction: what the planes measure (across a corridor) comes from them, what
-// they leave free (along it) stays tracking's. Unless filter.planes.fuse_rotation, only their
-// translation is fused, the rotation marginalised out. An increment that disagrees with
-// tracking's beyond the gate is not fused (counted).
+// plane-segmentation thread segments each frame into planes. Here a frame's planes are registered
+// by plane ICP (planes::registerPlanes) against those of the frame tracking measured it from
+// (its reference: a keyframe, or the previous frame), or when that one was not segmented, against
+// the first segmented frame measured from the same reference (the anchor). The plane measurement
+// of T_ref_curr is fused with tracking's (T_ref_curr, covariance_ref_curr) by information
+// (fuseMotion): what the planes measure (across a corridor) comes from them, what they leave free
+// (along it) stays tracking's. The filter's increment is then the step between the fused
+// T_ref_prev and T_ref_curr. Fusing against the reference rather than the previous frame keeps
+// the plane errors from adding up: like tracking's own, successive frames' errors against one
+// reference cancel in the increments instead of accumulating frame by frame (docs/planes.md).
+// Unless filter.planes.fuse_rotation, only the translation is fused, the rotation marginalised
+// out. A plane measurement that disagrees with tracking's beyond the gate is not fused (counted).
 //
 // No threads inside; owned by the filter thread. process() never throws on bad data.
 
 #include <atomic>
 #include <cstdint>
+#include <deque>
 #include <memory>
 #include <optional>
 
@@ -37,12 +43,12 @@ namespace slamd {
 /// The corridor mode's counts: written by the filter thread, read by any.
 struct CorridorModeStats {
   std::atomic<bool> on{false};
-  std::atomic<std::uint64_t> switched_on{0};    ///< times the mode came on
-  std::atomic<std::uint64_t> frames{0};         ///< frames filtered with the mode on
-  std::atomic<std::uint64_t> fused{0};          ///< plane increments fused
-  std::atomic<std::uint64_t> gated{0};          ///< plane increments too far from tracking's
-  std::atomic<std::uint64_t> unmatched{0};      ///< measured over another interval than tracking's
-  std::atomic<std::uint64_t> nis_sum_milli{0};  ///< sum of the fused increments' NIS x 1000
+  std::atomic<std::uint64_t> switched_on{0};  ///< times the mode came on
+  std::atomic<std::uint64_t> frames{0};       ///< frames filtered with the mode on
+  std::atomic<std::uint64_t> fused{0};        ///< plane measurements fused
+  std::atomic<std::uint64_t> gated{0};        ///< plane measurements too far from tracking's
+  std::atomic<std::uint64_t> unmatched{0};    ///< no segmented reference or anchor to register with
+  std::atomic<std::uint64_t> nis_sum_milli{0};         ///< sum of the fused increments' NIS x 1000
   std::atomic<std::uint64_t> registrations_failed{0};  ///< plane ICP failed
 };
 
@@ -66,10 +72,12 @@ class PoseEstimator {
  private:
   /// Updates the corridor mode from this frame's tracking.
   void updateCorridorMode(const OdometryResult& odometry);
-  /// Registers the frame's planes against the previous frame's and fuses the plane increment
-  /// into input (the filter's increment), when the two frames are tracking's interval.
-  void fusePlaneOdometry(const planes::PlaneSegmentation& planes, const OdometryResult& odometry,
-                         const CameraIntrinsics& intrinsics, FilterInput& input);
+  /// With the frame's planes: registers them against its reference's (or the reference's
+  /// anchor's), fuses the result with tracking's T_ref_curr, and sets input's increment from the
+  /// fused poses relative to the reference (see above). Without: forgets the fused pose.
+  void fusePlaneOdometry(const std::shared_ptr<const planes::PlaneSegmentation>& planes,
+                         const OdometryResult& odometry, const CameraIntrinsics& intrinsics,
+                         FilterInput& input);
 
   FilterConfig config_;
   VanishingPointSource vanishing_point_source_;
@@ -80,12 +88,26 @@ class PoseEstimator {
   Utime last_utime_ = 0;
   std::int64_t sequence_ = 0;
   CorridorModeStats corridor_;
-  struct FramePlanes {
-    Utime utime = 0;
+  /// A segmented frame that later frames' planes are registered against.
+  struct PlaneAnchor {
+    Utime utime = 0;      ///< the frame's
+    Utime ref_utime = 0;  ///< the reference tracking measured the frame from
+    SE3 T_ref_frame;      ///< the fused pose relative to that reference
     std::shared_ptr<const planes::PlaneSegmentation> planes;
   };
-  std::optional<FramePlanes> previous_planes_;  ///< the previous frame's, when segmented
-  int frames_with_features_ = 0;                ///< in a row, while the corridor mode is on
+  /// Keyframes' and the first frame of each reference's (newest last), then the previous frame.
+  std::deque<PlaneAnchor> plane_anchors_;
+  std::optional<PlaneAnchor> previous_planes_;
+  static constexpr std::size_t kMaxPlaneAnchors = 16;
+  /// The previous frame's pose relative to its reference as given to the filter (fused or
+  /// tracking's), while frames are segmented and measured.
+  struct ReferencePose {
+    Utime utime = 0;
+    Utime ref_utime = 0;
+    SE3 T_ref_frame;
+  };
+  std::optional<ReferencePose> previous_reference_pose_;
+  int frames_with_features_ = 0;  ///< in a row, while the corridor mode is on
 };
 
 }  // namespace slamd

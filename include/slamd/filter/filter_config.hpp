@@ -57,9 +57,10 @@ struct VanishingPointConfig {
 };
 
 /// The corridor mode, keys `filter.planes.*` (issue 23 item 4): where features run out, frames
-/// are segmented into planes (on their own thread), and plane ICP against the previous frame
-/// (planes::registerPlanes, on the filter thread) is fused with tracking's increment by
-/// information before the EKF's prediction (filter/motion_fusion.hpp, app/pose_estimator.hpp).
+/// are segmented into planes (on their own thread), and plane ICP against the frame tracking
+/// measured from (planes::registerPlanes, on the filter thread) is fused with tracking's
+/// measurement by information before the EKF's prediction (filter/motion_fusion.hpp,
+/// app/pose_estimator.hpp).
 struct PlaneOdometryConfig {
   /// Off: on slamd's own plain corridors, where features and dense alignment already hold the
   /// pose to 1-2 cm, the fused plane increments made held-out seeds worse (docs/planes.md).
