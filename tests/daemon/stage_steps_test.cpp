@@ -36,8 +36,12 @@ class RecordingPublisher final : public DaemonPublisher {
   void publishKeyframes(const KeyframeTrajectory&) override {}
   void publishMapUpdate(const MapUpdate&) override {}
   void publishFullMap(const FullMap& map) override { full_maps.push_back(map); }
+  void publishPlaneMap(const planes::PlaneMapSnapshot& plane_map) override {
+    plane_maps.push_back(plane_map);
+  }
   std::vector<PoseEstimate> poses;
   std::vector<FullMap> full_maps;
+  std::vector<planes::PlaneMapSnapshot> plane_maps;
 };
 
 using Trace = std::vector<StepTraceEntry>;
