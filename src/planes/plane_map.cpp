@@ -440,6 +440,11 @@ void PlaneMap::rebuild() {
   world_planes_ = std::move(planes);
 }
 
+double polygonGapM(const WorldPlane& a, const WorldPlane& b) {
+  const PlaneFrame frame(a.normal_world, a.offset_m, a.centroid_world);
+  return polygonGap(hullInPlane(frame, a.polygon_world), hullInPlane(frame, b.polygon_world));
+}
+
 DepthSnapStats snapDepthToPlanes(const cv::Mat& depth_m, const PlaneSegmentation& segmentation,
                                  const CameraIntrinsics& intrinsics, double max_sigmas,
                                  cv::Mat& snapped_depth_m) {

@@ -168,6 +168,10 @@ class PlaneMap {
   std::int64_t rebuilds_ = 0;
 };
 
+/// Distance between the polygons of two world planes, measured in `a`'s plane with `b`'s polygon
+/// cast onto it, metres; 0 when they overlap or touch (the extent test of the association).
+double polygonGapM(const WorldPlane& a, const WorldPlane& b);
+
 /// Depth with the noise across planes removed: each pixel labelled with a plane (labels of
 /// `segmentation`, CV_32S) whose measured depth z lies within max_sigmas * sigma_z of the depth
 /// z_p where its ray meets that plane (sigma_z = kinectSigmaZ(z_p)) gets z_p; other pixels keep
