@@ -1,6 +1,7 @@
 #include "slamd/comms/plane_map_codec.hpp"
 
 #include <cmath>
+#include <vector>
 
 namespace slamd {
 
@@ -19,7 +20,8 @@ slamd::plane_map_t toPlaneMapMessage(const planes::PlaneMapSnapshot& snapshot) {
     out.area_m2 = plane.area_m2;
     out.num_keyframes = static_cast<std::int32_t>(plane.keyframe_ids.size());
     out.num_vertices = static_cast<std::int32_t>(plane.polygon_world.size());
-    out.vertices.resize(plane.polygon_world.size());
+    // lcm-gen's encoder reads 3 values of each inner vector: each must hold them.
+    out.vertices.assign(plane.polygon_world.size(), std::vector<double>(3));
     for (std::size_t v = 0; v < plane.polygon_world.size(); ++v) {
       for (int k = 0; k < 3; ++k) out.vertices[v][k] = plane.polygon_world[v][k];
     }
@@ -60,7 +62,8 @@ std::optional<planes::PlaneMapSnapshot> fromPlaneMapMessage(const slamd::plane_m
       return fail(which + "num_vertices below 3 or not matching the vertices");
     }
     Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-    for (const auto& vertex : in.vertices) {
+    for (const std::vector<double>& vertex : in.vertices) {
+      if (vertex.size() != 3) return fail(which + "a vertex without exactly 3 coordinates");
       const Eigen::Vector3d p(vertex[0], vertex[1], vertex[2]);
       if (!p.allFinite()) return fail(which + "a non-finite vertex");
       if (std::abs(plane.normal_world.dot(p) + plane.offset_m) > kPlaneMapVertexToleranceM) {
