@@ -310,8 +310,10 @@ void SlamDaemon::Impl::checkOutputsAreDistinct() const {
 void SlamDaemon::Impl::removeStaleTemporaryFilesOfOutputs() const {
   const std::vector<std::string> removed = removeStaleTemporaryFiles(
       {daemon.trajectory_out, daemon.map_out, daemon.map_save_path, daemon.groundtruth_out,
-       daemon.metrics_out, mapping_config.snapshot_path},
-      daemon.save_dir, {".bt", ".ot"});
+       daemon.metrics_out, mapping_config.snapshot_path,
+       daemon.map_out.empty() ? "" : planes::planesPlyPathFor(daemon.map_out),
+       daemon.map_save_path.empty() ? "" : planes::planesPlyPathFor(daemon.map_save_path)},
+      daemon.save_dir, {".bt", ".ot", ".planes.ply"});
   for (const std::string& path : removed) {
     SLAMD_LOG_WARN(kLog) << "removed " << path
                          << ", a temporary file left by an interrupted save (the file it was "
