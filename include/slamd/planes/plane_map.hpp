@@ -11,9 +11,8 @@
 //
 // What is kept: per keyframe, its planes in its own camera frame (normal, offset, covariance,
 // centroid, convex boundary) and its pose. The world planes are derived from them: they are
-// rebuilt, lazily on the next read, whenever a keyframe is added, moved or forgotten. A rebuild
-// costs a few microseconds per keyframe plane, so moving every keyframe of a long run is cheap
-// and the world planes always agree with the newest poses.
+// rebuilt, lazily on the next read, whenever a keyframe is added, moved or forgotten, so they
+// always agree with the newest poses (a keyframe has a few planes: rebuilding is cheap).
 //
 // Rebuild: keyframe planes are taken in keyframe order, each keyframe's largest first, and each
 // joins the world plane it matches best, or starts a new one. A keyframe plane matches a world
@@ -27,10 +26,9 @@
 // max_distance_m)^2. Afterwards, world planes that match each other by the same tests (a plane
 // whose parts were first seen apart, then joined by a later keyframe) are merged.
 // The gates are fixed distances, not a Mahalanobis test on the fits' covariances: a keyframe
-// plane's covariance describes its depth noise only (for a wall at 2 m, tenths of a millimetre
-// and hundredths of a degree), while the pose error between keyframes and the fit's bias (a few
-// millimetres, docs/planes.md) are much larger and unmodelled; a chi-square gate on the fit
-// covariances would split every wall. The covariances weight the fusion instead.
+// plane's covariance describes its depth noise only, while the pose error between keyframes and
+// the fit's bias are larger and unmodelled, so a chi-square gate on the fit covariances would
+// split planes that are one (docs/planes.md). The covariances weight the fusion instead.
 //
 // Fusion: around a reference normal n0 (the world plane's first member's) with tangents t1, t2,
 // a plane not perpendicular to n0 is exactly n0.p + a t1.p + b t2.p + e = 0, linear in (a, b, e).
