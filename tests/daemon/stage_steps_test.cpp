@@ -424,6 +424,9 @@ TEST_F(DaemonStageSteps, TheMapFollowsACorrectionAStepPerFrameAndThenMatchesTheC
   config_.set("mapping.keyframe_step_budget_ms", "0.001");  // one step per frame
   MappingConfig mapping_config = MappingConfig::load(config_);
   mapping_config.keyframes_only = true;  // as the daemon sets it when the back end runs
+  // The reference integrates the frames as measured: the step must too (no depth snapped onto
+  // planes) for the two maps to be comparable voxel for voxel.
+  mapping_config.planes_snap_depth = false;
   Mapper mapper(mapping_config);
   Mapper reference(mapping_config);
   RecordingPublisher publisher;
