@@ -31,6 +31,7 @@
 #include "slamd/comms/lcm_frame_publisher.hpp"
 #include "slamd/comms/map_codec.hpp"
 #include "slamd/comms/odometry_codec.hpp"
+#include "slamd/comms/plane_map_codec.hpp"
 #include "slamd/comms/pose_codec.hpp"
 #include "slamd/comms/status_codec.hpp"
 #include "slamd/eval/json_writer.hpp"
@@ -75,6 +76,9 @@ class LcmDaemonPublisher final : public DaemonPublisher {
   }
   void publishFullMap(const FullMap& map) override {
     bus_.publishMessage(channels_.map, toFullMapMessage(map));
+  }
+  void publishPlaneMap(const planes::PlaneMapSnapshot& plane_map) override {
+    bus_.publishMessage(channels_.plane_map, toPlaneMapMessage(plane_map));
   }
 
  private:
@@ -306,8 +310,10 @@ void SlamDaemon::Impl::checkOutputsAreDistinct() const {
 void SlamDaemon::Impl::removeStaleTemporaryFilesOfOutputs() const {
   const std::vector<std::string> removed = removeStaleTemporaryFiles(
       {daemon.trajectory_out, daemon.map_out, daemon.map_save_path, daemon.groundtruth_out,
-       daemon.metrics_out, mapping_config.snapshot_path},
-      daemon.save_dir, {".bt", ".ot"});
+       daemon.metrics_out, mapping_config.snapshot_path,
+       daemon.map_out.empty() ? "" : planes::planesPlyPathFor(daemon.map_out),
+       daemon.map_save_path.empty() ? "" : planes::planesPlyPathFor(daemon.map_save_path)},
+      daemon.save_dir, {".bt", ".ot", ".planes.ply"});
   for (const std::string& path : removed) {
     SLAMD_LOG_WARN(kLog) << "removed " << path
                          << ", a temporary file left by an interrupted save (the file it was "
@@ -1362,6 +1368,17 @@ int SlamDaemon::Impl::writeOutputs() {
       } else {
         SLAMD_LOG_ERROR(kLog) << "map not saved: " << saved.error;
         exit_code = kExitOutputError;
+      }
+      // The planes beside the map (the pipeline has stopped: this thread owns the plane map).
+      if (steps && steps->mapping && mapping_config.planes_enabled) {
+        const MapFileResult planes_saved = steps->mapping->savePlaneMap(daemon.map_out);
+        if (planes_saved.ok) {
+          SLAMD_LOG_INFO(kLog) << "planes: " << steps->mapping->planeMap().worldPlanes().size()
+                               << " planes written to " << planes_saved.path;
+        } else {
+          SLAMD_LOG_ERROR(kLog) << "planes not saved: " << planes_saved.error;
+          exit_code = kExitOutputError;
+        }
       }
     }
   }

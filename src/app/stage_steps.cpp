@@ -17,6 +17,33 @@ constexpr const char* kLog = "slamd";
 std::int64_t nextWalkNs(std::int64_t start_ns, std::int64_t walk_ns, std::int64_t period_ns) {
   return start_ns + std::max<std::int64_t>(period_ns, 100 * walk_ns);
 }
+
+/// The keyframes of `kept` a correction culled. A correction lists every keyframe the back end
+/// holds up to its newest (ids increase): a keyframe older than that and not listed was culled
+/// by the back end (or never taken), and no correction will ever move it again.
+std::vector<std::int64_t> culledKeyframes(
+    const std::vector<std::pair<std::int64_t, SE3>>& keyframe_poses,
+    const std::vector<std::int64_t>& kept) {
+  std::int64_t newest_id = -1;
+  std::unordered_set<std::int64_t> listed;
+  for (const auto& entry : keyframe_poses) {
+    newest_id = std::max(newest_id, entry.first);
+    listed.insert(entry.first);
+  }
+  std::vector<std::int64_t> culled;
+  for (const std::int64_t id : kept) {
+    if (id < newest_id && listed.count(id) == 0) culled.push_back(id);
+  }
+  return culled;
+}
+
+planes::PlaneMapParams planeMapParams(const MappingConfig& config) {
+  planes::PlaneMapParams params;
+  params.max_angle_deg = config.planes_max_angle_deg;
+  params.max_distance_m = config.planes_max_distance_m;
+  params.max_gap_m = config.planes_max_gap_m;
+  return params;
+}
 }  // namespace
 
 bool StepBase::enter(std::uint64_t epoch, const RgbdFramePtr& frame) {
@@ -282,6 +309,11 @@ MappingStep::MappingStep(Mapper& mapper, const MappingConfig& config, DaemonPubl
                          SpscQueue<MapCorrection>* corrections, SpscQueue<MapRequest>* requests)
     : mapper_(mapper),
       keyframes_only_(config.keyframes_only),
+      frame_id_(config.frame_id),
+      planes_enabled_(config.planes_enabled),
+      snap_depth_(config.planes_snap_depth),
+      snap_sigmas_(config.planes_snap_sigmas),
+      plane_map_(planeMapParams(config)),
       step_budget_s_(config.keyframe_step_budget_ms * 1e-3),
       publisher_(publisher),
       corrections_(corrections),
@@ -289,6 +321,8 @@ MappingStep::MappingStep(Mapper& mapper, const MappingConfig& config, DaemonPubl
 
 void MappingStep::reset() {
   mapper_.reset();
+  plane_map_.clear();
+  plane_map_changed_ = true;
   T_world_uncorrected_ = SE3::Identity();
   if (loaded_map_path_.empty()) return;
   // The back end restores the loaded session: the map it was saved with comes back too.
@@ -319,7 +353,9 @@ void MappingStep::useLoadedMap(bool frozen, std::string map_path, std::string cl
 
 MappingStepStats MappingStep::stats() const {
   return MappingStepStats{leaf_voxels_.load(std::memory_order_relaxed),
-                          occupied_voxels_.load(std::memory_order_relaxed)};
+                          occupied_voxels_.load(std::memory_order_relaxed),
+                          keyframes_segmented_.load(std::memory_order_relaxed),
+                          pixels_snapped_.load(std::memory_order_relaxed)};
 }
 
 void MappingStep::applyCorrections() {
@@ -331,6 +367,7 @@ void MappingStep::applyCorrections() {
     forgetCulledKeyframes(newest->keyframe_poses);
     T_world_uncorrected_ = newest->T_world_uncorrected;
     const KeyframeCorrectionResult corrected = mapper_.correctKeyframePoses(newest->keyframe_poses);
+    if (plane_map_.setKeyframePoses(newest->keyframe_poses) > 0) plane_map_changed_ = true;
     if (corrected.keyframes_to_move > 0) {
       SLAMD_LOG_DEBUG(kLog) << "correction: " << corrected.keyframes_to_move
                             << " keyframes to move in the map";
@@ -352,18 +389,48 @@ void MappingStep::catchUp(std::int64_t cycle_start_ns) {
 
 void MappingStep::forgetCulledKeyframes(
     const std::vector<std::pair<std::int64_t, SE3>>& keyframe_poses) {
-  // A correction lists every keyframe the back end holds up to its newest (ids increase): a kept
-  // cloud older than that and not listed belongs to a keyframe the back end culled (or never
-  // took), which no correction will ever move again.
-  std::int64_t newest_id = -1;
-  std::unordered_set<std::int64_t> listed;
-  for (const auto& entry : keyframe_poses) {
-    newest_id = std::max(newest_id, entry.first);
-    listed.insert(entry.first);
+  for (const std::int64_t id : culledKeyframes(keyframe_poses, mapper_.keptKeyframeIds())) {
+    mapper_.forgetKeyframeInSteps(id);
   }
-  for (const std::int64_t id : mapper_.keptKeyframeIds()) {
-    if (id < newest_id && listed.count(id) == 0) mapper_.forgetKeyframeInSteps(id);
+  for (const std::int64_t id : culledKeyframes(keyframe_poses, plane_map_.keyframeIds())) {
+    plane_map_.forgetKeyframe(id);
+    plane_map_changed_ = true;
   }
+}
+
+const RgbdFrame& MappingStep::addKeyframePlanes(const RgbdFrame& frame, const SE3& T_world_camera,
+                                                std::int64_t keyframe_id) {
+  const planes::PlaneSegmentation& segmentation = segmenter_.segment(frame);
+  plane_map_.addKeyframe(keyframe_id, T_world_camera, segmentation.planes, frame.utime);
+  plane_map_changed_ = true;
+  keyframes_segmented_.fetch_add(1, std::memory_order_relaxed);
+  if (!snap_depth_) return frame;
+  const planes::DepthSnapStats snapped = planes::snapDepthToPlanes(
+      frame.depth_m, segmentation, frame.intrinsics, snap_sigmas_, snapped_depth_m_);
+  pixels_snapped_.fetch_add(snapped.snapped, std::memory_order_relaxed);
+  // The images are shared, not copied; only the depth differs.
+  snapped_frame_ = frame;
+  snapped_frame_.depth_m = snapped_depth_m_;
+  return snapped_frame_;
+}
+
+void MappingStep::publishPlaneMap() {
+  if (!planes_enabled_) return;
+  publisher_.publishPlaneMap(plane_map_.snapshot(frame_id_));
+  plane_map_changed_ = false;
+}
+
+MapFileResult MappingStep::savePlaneMap(const std::string& map_path) {
+  MapFileResult result;
+  result.path = planes::planesPlyPathFor(map_path);
+  if (!planes_enabled_) {
+    result.error = "the plane map is off (mapping.planes.enabled)";
+    return result;
+  }
+  const std::int64_t start_ns = steadyNowNs();
+  result.ok = planes::writePlaneMapPly(result.path, plane_map_.snapshot(frame_id_), &result.error);
+  result.seconds = 1e-9 * static_cast<double>(steadyNowNs() - start_ns);
+  return result;
 }
 
 SavedMap saveMapForSession(Mapper& mapper, const std::string& map_path,
@@ -391,6 +458,7 @@ void MappingStep::serveRequests() {
   while (auto request = requests_->tryPop()) {
     if (request->kind == MapRequest::Kind::kPublish) {
       publisher_.publishFullMap(mapper_.fullMap());
+      publishPlaneMap();
       continue;
     }
     if (request->saved) {
@@ -403,6 +471,14 @@ void MappingStep::serveRequests() {
     } else {
       SLAMD_LOG_ERROR(kLog) << "SAVE_MAP failed: " << saved.error;
     }
+    if (!planes_enabled_) continue;
+    const MapFileResult planes_saved = savePlaneMap(request->path);
+    if (planes_saved.ok) {
+      SLAMD_LOG_INFO(kLog) << "SAVE_MAP: " << plane_map_.worldPlanes().size()
+                           << " planes written to " << planes_saved.path;
+    } else {
+      SLAMD_LOG_ERROR(kLog) << "SAVE_MAP: planes not written: " << planes_saved.error;
+    }
   }
 }
 
@@ -411,6 +487,9 @@ void MappingStep::publishOutputs(const MapperOutputs& outputs) {
     publisher_.publishMapUpdate(*outputs.update);
   }
   if (outputs.full_map) publisher_.publishFullMap(*outputs.full_map);
+  // The planes go out at the voxel map's cadence: with an update when they changed, and with
+  // every full map, so that a subscriber that missed one has them again within a period.
+  if (outputs.full_map || (outputs.update && plane_map_changed_)) publishPlaneMap();
   if (outputs.snapshot) {
     // Logged on each change between failing and succeeding, so a full disk gives one line per
     // retry and one when it recovers, not one per period forever.
@@ -450,10 +529,14 @@ void MappingStep::process(const EstimatedPacket& packet) {
     const SE3 T_world_camera = T_world_uncorrected_ * packet.pose.T_world_camera;
     // A keyframe goes into the queue (kept, it goes in a part at a time, see catchUp); other
     // frames go in at once.
+    // Planes: keyframes only (about one a second, 4 ms each to segment).
+    const RgbdFrame& frame = keyframe_id && planes_enabled_
+                                 ? addKeyframePlanes(*packet.frame, T_world_camera, *keyframe_id)
+                                 : *packet.frame;
     const IntegrationResult result =
-        awaiting_map_frame_ ? mapper_.holdKeyframe(*packet.frame, T_world_camera, *keyframe_id)
-        : keyframe_id       ? mapper_.addKeyframe(*packet.frame, T_world_camera, *keyframe_id)
-                            : mapper_.integrate(*packet.frame, T_world_camera);
+        awaiting_map_frame_ ? mapper_.holdKeyframe(frame, T_world_camera, *keyframe_id)
+        : keyframe_id       ? mapper_.addKeyframe(frame, T_world_camera, *keyframe_id)
+                            : mapper_.integrate(frame, T_world_camera);
     if (result.status == IntegrationStatus::kBadFrame ||
         result.status == IntegrationStatus::kBadPose) {
       // The pipeline counts a thrown error against this stage and carries on.

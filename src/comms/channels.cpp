@@ -24,6 +24,7 @@ const ConfigSchema<ChannelConfig>& ChannelConfig::schema() {
           .text("vanishing_point", &C::vanishing_point, "detected vanishing points")
           .text("map_update", &C::map_update, "voxel_map_update_t")
           .text("map", &C::map, "full voxel_map_t")
+          .text("plane_map", &C::plane_map, "plane_map_t: the map's planes (mapping.planes.*)")
           .text("keyframes", &C::keyframes, "optimised keyframe poses")
           .text("status", &C::status, "SLAMD_STATUS (daemon.status_period_s)")
           .text("command", &C::command, "slamd.command_t received");

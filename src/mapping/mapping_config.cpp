@@ -112,6 +112,24 @@ const ConfigSchema<MappingConfig>& MappingConfig::schema() {
           .number("keyframe_step_points", &C::keyframe_step_points, 100, 10000000, "points",
                   "a kept keyframe cloud goes into the map, and moves, in parts of this many "
                   "points (bands of the image), a step each")
+          .flag("planes.enabled", &C::planes_enabled,
+                "segment each keyframe into planes (4 ms each) in the mapping thread and fuse "
+                "them into the map's planes, which follow the back end's corrections: published "
+                "on channels.plane_map and written beside a saved map as <map>.planes.ply")
+          .flag("planes.snap_depth", &C::planes_snap_depth,
+                "with planes.enabled: a keyframe's depth on a plane is replaced by where the "
+                "pixel's ray meets the plane (within planes.snap_sigmas), so the map's walls and "
+                "floors lose the depth noise across them")
+          .number("planes.snap_sigmas", &C::planes_snap_sigmas, 0.5, 10.0, "sigma",
+                  "a pixel is snapped onto its plane only when its depth is within this many "
+                  "standard deviations of the Kinect v1 depth noise of the plane's depth there")
+          .number("planes.max_angle_deg", &C::planes_max_angle_deg, 0.1, 45.0, "deg",
+                  "a keyframe's plane joins a map plane only when their normals are within this")
+          .number("planes.max_distance_m", &C::planes_max_distance_m, 0.001, 1.0, "m",
+                  "... and its centroid lies within this of the map plane")
+          .number("planes.max_gap_m", &C::planes_max_gap_m, 0.0, 10.0, "m",
+                  "... and its outline overlaps the map plane's polygon or lies within this of it "
+                  "(in the plane)")
           .number("coarse_far_radius_m", &C::coarse_far_radius_m, 0.0, 1000.0, "m",
                   "over the memory limit, the map farther than this from the camera is made "
                   "coarser (see coarse_far_levels); what the camera sees stays at full resolution "

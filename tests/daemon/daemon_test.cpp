@@ -10,6 +10,7 @@
 #include "slamd/common/log.hpp"
 #include "slamd/common/program_options.hpp"
 #include "slamd/common/trajectory.hpp"
+#include "slamd/planes/plane_map.hpp"
 #include "test_data.hpp"
 
 namespace slamd {
@@ -51,6 +52,32 @@ TEST_F(DaemonInProcess, ProcessesEveryFrameOfASequenceAndWritesOutputs) {
   }
   EXPECT_LT(worst_m, 0.02) << "tracking drifted";
   EXPECT_GT(std::filesystem::file_size(overrides.map_out), 100u);
+}
+
+TEST_F(DaemonInProcess, WritesTheMapsPlanesBesideTheMapAsPlyPolygons) {
+  Config config = smallSyntheticConfig(40);
+  DaemonOverrides overrides;
+  overrides.source = "synthetic:room";
+  overrides.map_out = (dir_ / "map.bt").string();
+  const DaemonSummary summary = runToEnd(config, overrides);
+  EXPECT_EQ(summary.errors, 0u);
+  std::vector<planes::PlyPolygon> polygons;
+  std::string error;
+  ASSERT_TRUE(planes::readPlaneMapPly((dir_ / "map.planes.ply").string(), polygons, &error))
+      << error;
+  // The room's first views: walls, floor and furniture.
+  EXPECT_GE(polygons.size(), 3u);
+  for (const planes::PlyPolygon& polygon : polygons) {
+    EXPECT_GE(polygon.vertices.size(), 3u);
+    EXPECT_NEAR(polygon.normal.norm(), 1.0, 1e-5);
+  }
+
+  // With the planes off, nothing is written beside the map.
+  config.set("mapping.planes.enabled", "false");
+  overrides.map_out = (dir_ / "without.bt").string();
+  runToEnd(config, overrides);
+  EXPECT_TRUE(std::filesystem::exists(overrides.map_out));
+  EXPECT_FALSE(std::filesystem::exists(dir_ / "without.planes.ply"));
 }
 
 TEST_F(DaemonInProcess, ShutdownRequestDrainsQueuedFramesAndStillWritesOutputs) {

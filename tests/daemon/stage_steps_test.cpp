@@ -19,6 +19,7 @@
 
 #include "daemon_fixture.hpp"
 #include "slamd/backend/vocabulary.hpp"
+#include "slamd/common/trajectory.hpp"
 #include "slamd/comms/map_codec.hpp"
 #include "slamd/pipeline/drop_oldest_queue.hpp"
 #include "slamd/pipeline/spsc_queue.hpp"
@@ -36,8 +37,12 @@ class RecordingPublisher final : public DaemonPublisher {
   void publishKeyframes(const KeyframeTrajectory&) override {}
   void publishMapUpdate(const MapUpdate&) override {}
   void publishFullMap(const FullMap& map) override { full_maps.push_back(map); }
+  void publishPlaneMap(const planes::PlaneMapSnapshot& plane_map) override {
+    plane_maps.push_back(plane_map);
+  }
   std::vector<PoseEstimate> poses;
   std::vector<FullMap> full_maps;
+  std::vector<planes::PlaneMapSnapshot> plane_maps;
 };
 
 using Trace = std::vector<StepTraceEntry>;
@@ -102,6 +107,93 @@ class DaemonStageSteps : public DaemonInProcess {
   Config config_;
   std::unique_ptr<FrameSource> source_;
 };
+
+/// A keyframe packet of `frame` at `T_world_camera`, as the filter step passes it on.
+EstimatedPacket keyframePacket(RgbdFramePtr frame, std::int64_t id, const SE3& T_world_camera) {
+  EstimatedPacket packet;
+  OdometryResult odometry;
+  odometry.utime = frame->utime;
+  odometry.is_keyframe = true;
+  auto keyframe = std::make_shared<Keyframe>();
+  keyframe->id = id;
+  keyframe->utime = frame->utime;
+  odometry.keyframe = keyframe;
+  packet.frame = std::move(frame);
+  packet.odometry = std::move(odometry);
+  packet.pose.tracking_state = TrackingState::kOk;
+  packet.pose.T_world_camera = T_world_camera;
+  return packet;
+}
+
+TEST_F(DaemonStageSteps, MappingPutsKeyframePlanesInAPlaneMapThatFollowsCorrectionsAndIsPublished) {
+  const MappingConfig mapping_config = MappingConfig::load(config_);
+  ASSERT_TRUE(mapping_config.planes_enabled);  // the default
+  Mapper mapper(mapping_config);
+  RecordingPublisher publisher;
+  SpscQueue<MapCorrection> map_corrections(64);
+  SpscQueue<MapRequest> map_requests(4);
+  MappingStep mapping(mapper, mapping_config, publisher, &map_corrections, &map_requests);
+  const Trajectory truth = *source_->groundTruth();
+  std::vector<RgbdFramePtr> frames;
+  for (int i = 0; i < kFrames; ++i) {
+    const FrameRead read = source_->next(std::chrono::seconds(10));
+    ASSERT_EQ(read.status, FrameRead::Status::kFrame);
+    frames.push_back(read.frame);
+  }
+  const std::vector<int> keyframe_frames = {0, 4, 8};
+  for (std::size_t k = 0; k < keyframe_frames.size(); ++k) {
+    const auto index = static_cast<std::size_t>(keyframe_frames[k]);
+    mapping.process(
+        keyframePacket(frames[index], static_cast<std::int64_t>(k), truth[index].T_world_camera));
+  }
+  EXPECT_EQ(mapping.stats().keyframes_segmented, 3);
+  EXPECT_GT(mapping.stats().pixels_snapped, 10000);
+  const std::vector<planes::WorldPlane> before = mapping.planeMap().worldPlanes();
+  ASSERT_GE(before.size(), 2u);
+
+  // PUBLISH_MAP sends the plane map with the full map.
+  const std::size_t published = publisher.plane_maps.size();
+  MapRequest request;
+  request.kind = MapRequest::Kind::kPublish;
+  ASSERT_TRUE(map_requests.tryPush(std::move(request)));
+  mapping.serveRequests();
+  ASSERT_EQ(publisher.plane_maps.size(), published + 1);
+  EXPECT_EQ(publisher.plane_maps.back().frame_id, mapping_config.frame_id);
+  EXPECT_EQ(publisher.plane_maps.back().planes.size(), before.size());
+
+  // A correction that raises keyframes 1 and 2 by a metre and no longer lists keyframe 0 (culled):
+  // the plane map is what those two keyframes' planes make at their new poses.
+  SE3 raise = SE3::Identity();
+  raise.translation() = Eigen::Vector3d(0.0, 0.0, 1.0);
+  BackendCorrection correction;
+  for (std::int64_t id : {1, 2}) {
+    const SE3 moved =
+        raise * truth[static_cast<std::size_t>(keyframe_frames[static_cast<std::size_t>(id)])]
+                    .T_world_camera;
+    correction.keyframe_poses.emplace_back(id, moved);
+  }
+  ASSERT_TRUE(map_corrections.tryPush(MapCorrection{correction, mapping.resetEpoch()}));
+  mapping.process(EstimatedPacket{});  // a heartbeat: corrections are taken on every packet
+  EXPECT_EQ(mapping.planeMap().keyframeIds(), (std::vector<std::int64_t>{1, 2}));
+
+  planes::PlaneSegmenter segmenter;
+  planes::PlaneMap expected;
+  for (const auto& [id, T_world_camera] : correction.keyframe_poses) {
+    const RgbdFrame& frame =
+        *frames[static_cast<std::size_t>(keyframe_frames[static_cast<std::size_t>(id)])];
+    expected.addKeyframe(id, T_world_camera, segmenter.segment(frame).planes, frame.utime);
+  }
+  const std::vector<planes::WorldPlane>& after = mapping.planeMap().worldPlanes();
+  ASSERT_EQ(after.size(), expected.worldPlanes().size());
+  for (std::size_t i = 0; i < after.size(); ++i) {
+    const planes::WorldPlane& want = expected.worldPlanes()[i];
+    EXPECT_LT((after[i].normal_world - want.normal_world).norm(), 1e-9) << i;
+    EXPECT_NEAR(after[i].offset_m, want.offset_m, 1e-9) << i;
+    EXPECT_EQ(after[i].keyframe_ids, want.keyframe_ids) << i;
+  }
+  // The plane map changed: it goes out with the next map update.
+  EXPECT_GE(publisher.plane_maps.size(), published + 1);
+}
 
 TEST_F(DaemonStageSteps, NoPacketFromBeforeAResetIsProcessedAfterAStageReset) {
   const FilterConfig filter_config = FilterConfig::load(config_);
@@ -332,6 +424,9 @@ TEST_F(DaemonStageSteps, TheMapFollowsACorrectionAStepPerFrameAndThenMatchesTheC
   config_.set("mapping.keyframe_step_budget_ms", "0.001");  // one step per frame
   MappingConfig mapping_config = MappingConfig::load(config_);
   mapping_config.keyframes_only = true;  // as the daemon sets it when the back end runs
+  // The reference integrates the frames as measured: the step must too (no depth snapped onto
+  // planes) for the two maps to be comparable voxel for voxel.
+  mapping_config.planes_snap_depth = false;
   Mapper mapper(mapping_config);
   Mapper reference(mapping_config);
   RecordingPublisher publisher;

@@ -29,6 +29,7 @@
 #include "slamd/comms/map_codec.hpp"
 #include "slamd/comms/message_codec.hpp"
 #include "slamd/comms/odometry_codec.hpp"
+#include "slamd/comms/plane_map_codec.hpp"
 #include "slamd/comms/pose_codec.hpp"
 #include "slamd/comms/status_codec.hpp"
 #include "slamd/mapping/keyframe_cloud_io.hpp"
@@ -168,6 +169,18 @@ void poseAndStatusSeeds(CorpusWriter& corpus) {
   odometry.tracking_state = TrackingState::kOk;
   corpus.add("lcm_messages", encodeMessage(toOdometryMessage(odometry)));
   corpus.add("lcm_messages", encodeMessage(toVanishingPointMessage(pose.utime, {})));
+
+  planes::PlaneMapSnapshot plane_map;
+  plane_map.utime = pose.utime;
+  plane_map.frame_id = "world";
+  planes::WorldPlane floor;
+  floor.id = 3;
+  floor.polygon_world = {{0, 0, 0}, {2, 0, 0}, {2, 1, 0}};
+  floor.area_m2 = 1.0;
+  floor.keyframe_ids = {0, 1};
+  plane_map.planes = {floor, floor};
+  plane_map.planes[1].id = 4;
+  corpus.add("lcm_messages", encodeMessage(toPlaneMapMessage(plane_map)));
 
   std::vector<StageStats> stages(4);
   const char* names[] = {"capture", "tracking", "filter", "mapping"};

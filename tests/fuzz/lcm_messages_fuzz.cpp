@@ -3,7 +3,8 @@
 // A peer can send any bytes on any channel, so each input is decoded as every type, the way
 // LcmBus would (decodeMessage: the structural precheck, then lcm-gen's decoder). What decodes
 // is handed to the code that consumes that type on the receiving side: the frame codecs, the
-// command path check, the pose, keyframe-trajectory and status readers, and a map replica.
+// command path check, the pose, keyframe-trajectory, status and plane map readers, and a map
+// replica.
 
 #include <filesystem>
 #include <string>
@@ -14,6 +15,7 @@
 #include "slamd/comms/frame_codec.hpp"
 #include "slamd/comms/map_codec.hpp"
 #include "slamd/comms/message_codec.hpp"
+#include "slamd/comms/plane_map_codec.hpp"
 #include "slamd/comms/pose_codec.hpp"
 #include "slamd/comms/status_codec.hpp"
 
@@ -75,6 +77,9 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       replica.applyFullMap(*map);
     }
   });
+  decodeAs<slamd::plane_map_t>(
+      data, size, [](const slamd::plane_map_t& message) { fromPlaneMapMessage(message); });
+  decodeAs<slamd::plane_t>(data, size);
   decodeAs<slamd::odometry_t>(data, size);
   decodeAs<slamd::vanishing_point_t>(data, size);
   decodeAs<slamd::stage_status_t>(data, size);

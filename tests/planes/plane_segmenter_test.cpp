@@ -14,6 +14,7 @@
 #include <gtest/gtest.h>
 #include <opencv2/imgcodecs.hpp>
 
+#include "planes_test_support.hpp"
 #include "slamd/capture/tum_dataset.hpp"
 #include "slamd/common/config.hpp"
 #include "slamd/common/rgbd_frame.hpp"
@@ -25,12 +26,7 @@
 namespace slamd::planes {
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
 constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
-
-double angleDeg(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
-  return std::acos(std::clamp(a.normalized().dot(b.normalized()), -1.0, 1.0)) * 180.0 / kPi;
-}
 
 // ---------------------------------------------------------------------------------------------
 // Hand-built scenes: a 160x120 camera looking at analytic planes, flat colours per region.
@@ -314,19 +310,6 @@ TEST(PlaneSegmenter, PredictedCovarianceMatchesTheScatterOfNoisyFits) {
 
 // ---------------------------------------------------------------------------------------------
 // Rendered scenes with exact ground-truth planes (slamd's synthetic room and corridor).
-
-constexpr double kMinStructuralAreaM2 = 3.0;
-
-/// The scene with its default look, except that corridor walls carry no doors: a door stands
-/// 12 mm proud of its wall and has a wall-like colour, so it grows into the wall's segment (within
-/// the growth tolerance) and its plane then lies between the two (up to 18 mm from the wall at
-/// the camera's foot point when a door fills most of the view); docs/planes.md reports it.
-std::unique_ptr<SyntheticSource> makeSource(const std::string& scene, bool exact) {
-  Config config;
-  if (exact) config.applyOverride("synthetic.sensor.exact=true");
-  if (scene == "corridor") config.applyOverride("synthetic.doors=false");
-  return std::make_unique<SyntheticSource>(scene, SyntheticConfig::load(config));
-}
 
 /// A large scene surface (wall, floor, ceiling) and the plane that covers most of it.
 struct SurfaceMatch {

@@ -46,6 +46,7 @@
 #include "slamd/pipeline/pipeline.hpp"
 #include "slamd/pipeline/spsc_queue.hpp"
 #include "slamd/pipeline/wake_signal.hpp"
+#include "slamd/planes/plane_map.hpp"
 #include "slamd/tracking/visual_odometry.hpp"
 
 namespace slamd {
@@ -62,6 +63,8 @@ class DaemonPublisher {
   virtual void publishKeyframes(const KeyframeTrajectory& trajectory) = 0;
   virtual void publishMapUpdate(const MapUpdate& update) = 0;
   virtual void publishFullMap(const FullMap& map) = 0;
+  /// The map's planes (mapping.planes.enabled).
+  virtual void publishPlaneMap(const planes::PlaneMapSnapshot& plane_map) = 0;
 };
 
 /// One packet as a step saw it, for tests (see StepBase::setTrace).
@@ -455,12 +458,20 @@ struct MapCorrection {
 
 struct MappingStepStats {
   std::int64_t leaf_voxels = 0;
-  std::int64_t occupied_voxels = 0;  ///< counted once a second
+  std::int64_t occupied_voxels = 0;      ///< counted once a second
+  std::int64_t keyframes_segmented = 0;  ///< keyframes whose planes went into the plane map
+  std::int64_t pixels_snapped = 0;       ///< keyframe pixels moved onto their plane
 };
 
 /// Integrates each tracked frame (or keyframe) into the map at its corrected pose, moves the
 /// keyframes the back end's corrections move (within mapping.keyframe_step_budget_ms per frame),
 /// serves SAVE_MAP / PUBLISH_MAP and publishes the map.
+/// With mapping.planes.enabled it also segments each keyframe into planes (here, so that one
+/// thread owns the plane map), fuses them into the plane map, which follows the same corrections
+/// and culls as the keyframes' clouds, snaps the keyframe's depth onto its planes before the
+/// keyframe goes into the OctoMap (mapping.planes.snap_depth), publishes the plane map with the
+/// map's updates when it changed, with every full map and on PUBLISH_MAP, and writes it beside
+/// the map on SAVE_MAP (planes::planesPlyPathFor).
 class MappingStep : public StepBase {
  public:
   MappingStep(Mapper& mapper, const MappingConfig& config, DaemonPublisher& publisher,
@@ -480,6 +491,11 @@ class MappingStep : public StepBase {
   /// Serves the waiting map requests (also called by the control thread after the stop).
   void serveRequests();
   MappingStepStats stats() const;
+  /// Writes the plane map as PLY polygons beside the map file `map_path` (mapping thread, or the
+  /// control thread after the stop). Not ok, with a sentence, when the planes are off.
+  MapFileResult savePlaneMap(const std::string& map_path);
+  /// The plane map (the mapping thread's; the control thread's after the stop).
+  planes::PlaneMap& planeMap() { return plane_map_; }
   /// The level the mapper degrades by (read every cycle; set by the control thread). Under
   /// kOver, the kept clouds of all but the newest kKeptCloudsOverTheLimit keyframes are
   /// released, and the map far from the camera is made coarser (Mapper::coarsenFarMap) every
@@ -493,15 +509,30 @@ class MappingStep : public StepBase {
  private:
   void applyCorrections();
   void catchUp(std::int64_t cycle_start_ns);
-  /// Forgets the kept clouds of keyframes a correction no longer lists (culled by the back end).
+  /// Forgets the kept clouds and planes of keyframes a correction no longer lists (culled by the
+  /// back end).
   void forgetCulledKeyframes(const std::vector<std::pair<std::int64_t, SE3>>& keyframe_poses);
+  /// Segments a keyframe, adds its planes to the plane map and returns the frame to map: the
+  /// keyframe with its depth snapped onto its planes (mapping.planes.snap_depth), or `frame`.
+  const RgbdFrame& addKeyframePlanes(const RgbdFrame& frame, const SE3& T_world_camera,
+                                     std::int64_t keyframe_id);
+  void publishPlaneMap();
   void publishOutputs(const MapperOutputs& outputs);
   /// Under kOver: makes the map far from the camera (T_world_camera) coarser, when due.
   void coarsenFarMap(const SE3& T_world_camera);
 
   Mapper& mapper_;
   bool keyframes_only_;
-  double step_budget_s_;  ///< per frame, for moving keyframes a correction moved
+  std::string frame_id_;
+  bool planes_enabled_;
+  bool snap_depth_;
+  double snap_sigmas_;
+  planes::PlaneSegmenter segmenter_;
+  planes::PlaneMap plane_map_;
+  bool plane_map_changed_ = false;  ///< since it was last published
+  cv::Mat snapped_depth_m_;         ///< scratch: the keyframe's depth snapped onto its planes
+  RgbdFrame snapped_frame_;         ///< scratch: the keyframe with that depth
+  double step_budget_s_;            ///< per frame, for moving keyframes a correction moved
   DaemonPublisher& publisher_;
   EpochInbox<MapCorrection> corrections_;
   SpscQueue<MapRequest>* requests_;
@@ -516,6 +547,8 @@ class MappingStep : public StepBase {
   bool awaiting_map_frame_ = false;  ///< frames are not yet in the loaded map's frame
   std::atomic<std::int64_t> leaf_voxels_{0};
   std::atomic<std::int64_t> occupied_voxels_{0};
+  std::atomic<std::int64_t> keyframes_segmented_{0};
+  std::atomic<std::int64_t> pixels_snapped_{0};
   const std::atomic<MemoryPressure>* memory_pressure_ = nullptr;
 };
 

@@ -28,6 +28,7 @@ struct ChannelConfig {
   std::string vanishing_point = "SLAMD_VP";
   std::string map_update = "SLAMD_MAP_UPDATE";
   std::string map = "SLAMD_MAP";
+  std::string plane_map = "SLAMD_PLANE_MAP";
   std::string keyframes = "SLAMD_KEYFRAMES";
   std::string status = "SLAMD_STATUS";
   std::string command = "SLAMD_COMMAND";

@@ -27,6 +27,8 @@
 #include "slamd/keyframe_pose_t.hpp"
 #include "slamd/keyframe_trajectory_t.hpp"
 #include "slamd/odometry_t.hpp"
+#include "slamd/plane_map_t.hpp"
+#include "slamd/plane_t.hpp"
 #include "slamd/pose_t.hpp"
 #include "slamd/rgbd_frame_t.hpp"
 #include "slamd/stage_status_t.hpp"
@@ -193,6 +195,37 @@ struct LcmLayout<slamd::odometry_t> {
     // utime, prev_utime, translation[3], rotation[4], covariance[36], status, num_features,
     // num_matches, num_inliers, reprojection_error_px, is_keyframe, reference_keyframe_id
     return w.skip(2 * kInt64 + 43 * kDouble + kInt8 + 3 * kInt32 + kDouble + kInt8 + kInt64);
+  }
+};
+
+template <>
+struct LcmLayout<slamd::plane_t> {
+  /// The fixed fields, before the vertices.
+  static constexpr std::size_t kMinBytes =
+      lcm_bytes::kInt64 + 5 * lcm_bytes::kDouble + 2 * lcm_bytes::kInt32;
+  static bool walk(LcmFieldWalker& w) {
+    using namespace lcm_bytes;
+    std::int32_t count = 0;
+    // id, normal[3], offset, area_m2, num_keyframes, num_vertices + vertices[num_vertices][3]
+    return w.skip(kInt64 + 5 * kDouble + kInt32) && w.readCount(count, 3 * kDouble) &&
+           w.skip(static_cast<std::size_t>(count) * 3 * kDouble);
+  }
+};
+
+template <>
+struct LcmLayout<slamd::plane_map_t> {
+  static bool walk(LcmFieldWalker& w) {
+    using namespace lcm_bytes;
+    std::int32_t count = 0;
+    // utime, frame_id, num_planes + planes
+    if (!(w.skip(kInt64) && w.skipString() &&
+          w.readCount(count, LcmLayout<slamd::plane_t>::kMinBytes))) {
+      return false;
+    }
+    for (std::int32_t i = 0; i < count; ++i) {
+      if (!LcmLayout<slamd::plane_t>::walk(w)) return false;
+    }
+    return true;
   }
 };
 

@@ -70,6 +70,14 @@ struct MappingConfig {
   double keyframe_step_budget_ms = 20.0;
   int keyframe_step_points = 4000;
 
+  // --- planes of keyframes (planes::PlaneMap), their export, and depth snapped onto them -----
+  bool planes_enabled = true;
+  bool planes_snap_depth = true;
+  double planes_snap_sigmas = 3.0;
+  double planes_max_angle_deg = 5.0;
+  double planes_max_distance_m = 0.05;
+  double planes_max_gap_m = 0.3;
+
   // --- degrading under memory pressure (daemon.memory_limit_mb) ------------------------------
   double coarse_far_radius_m = 6.0;
   int coarse_far_levels = 2;

@@ -45,7 +45,8 @@ CHECK_PID=$!
 wait_for 60 "the decoding check to subscribe" grep -q listening decoded.txt
 
 # slamd with the back end (SLAMD_KEYFRAMES) and its input published (SLAMD_FRAMES); a command
-# (SLAMD_COMMAND) asks for a full map (SLAMD_MAP) while it runs.
+# (SLAMD_COMMAND) asks for a full map (SLAMD_MAP, and the planes on SLAMD_PLANE_MAP) while it
+# runs.
 "$SLAMD_BIN/slamd" --config "$SLAMD_SOURCE_DIR/config/synthetic.yaml" --log-level warn \
   "${SMALL_CAMERA[@]}" --source synthetic:room --set synthetic.frames=150 \
   --set backend.enabled=true --set daemon.publish_frames=true 2> slamd.log &
@@ -59,7 +60,8 @@ cat decoded.txt
 
 for expected in SLAMD_POSE:slamd.pose_t POSE:bot_core.pose_t SLAMD_ODOMETRY:slamd.odometry_t \
     SLAMD_STATUS:slamd.status_t SLAMD_MAP_UPDATE:slamd.voxel_map_update_t \
-    SLAMD_MAP:slamd.voxel_map_t SLAMD_KEYFRAMES:slamd.keyframe_trajectory_t \
+    SLAMD_MAP:slamd.voxel_map_t SLAMD_PLANE_MAP:slamd.plane_map_t \
+    SLAMD_KEYFRAMES:slamd.keyframe_trajectory_t \
     SLAMD_COMMAND:slamd.command_t SLAMD_FRAMES:slamd.rgbd_frame_t; do
   channel=${expected%%:*} type=${expected#*:}
   line=$(grep "^$channel " decoded.txt) || fail "no message on $channel"
