@@ -155,8 +155,8 @@ const ConfigSchema<PlaneOdometryConfig>& PlaneOdometryConfig::schema() {
       ConfigSchema<C>("filter.planes")
           .flag("enabled", &C::enabled,
                 "the corridor mode: where features run out, frames are segmented into planes (own "
-                "thread) and plane ICP against the previous frame is fused with tracking's "
-                "increment; off by default: it made held-out corridors worse (docs/planes.md)")
+                "thread) and plane ICP against the frame tracking measured from is fused with "
+                "tracking's measurement (docs/planes.md)")
           .number("corridor_min_inliers", &C::corridor_min_inliers, 0, 100000, "inliers",
                   "a frame tracked with fewer inliers (or not measured by features) switches "
                   "the corridor mode on")

@@ -120,12 +120,12 @@ TEST_F(DaemonInProcess, BackEndThreadRunsAlongsideTheOtherStages) {
 
 TEST_F(DaemonInProcess, InAPlainCorridorTheCorridorModeComesOnAndFusesPlaneOdometry) {
   // Walls with almost no texture (issue 23's plain corridor): tracking runs on few inliers, so
-  // the corridor mode switches on and the frames' plane increments are fused.
+  // the corridor mode (on by default) switches on and the frames' plane measurements are fused.
   const auto plainCorridor = [this](bool corridor_mode) {
     Config config = smallSyntheticConfig(90);
     config.set("synthetic.texture_density", "0.04");
     config.set("synthetic.posters", "false");
-    if (corridor_mode) config.set("filter.planes.enabled", "true");
+    if (!corridor_mode) config.set("filter.planes.enabled", "false");
     DaemonOverrides overrides;
     overrides.source = "synthetic:corridor";
     return runToEnd(config, overrides);
@@ -138,7 +138,7 @@ TEST_F(DaemonInProcess, InAPlainCorridorTheCorridorModeComesOnAndFusesPlaneOdome
   EXPECT_GE(summary.plane_increments_fused, 5u);
   EXPECT_GT(summary.plane_increments_mean_nis, 0.0);
 
-  // Switched off (the default), nothing of it runs.
+  // Switched off, nothing of it runs.
   const DaemonSummary without = plainCorridor(false);
   EXPECT_EQ(without.poses_published, 90u);
   EXPECT_EQ(without.corridor_mode_switched_on, 0u);

@@ -62,21 +62,24 @@ struct VanishingPointConfig {
 /// measurement by information before the EKF's prediction (filter/motion_fusion.hpp,
 /// app/pose_estimator.hpp).
 struct PlaneOdometryConfig {
-  /// Off: on slamd's own plain corridors, where features and dense alignment already hold the
-  /// pose to 1-2 cm, the fused plane increments made held-out seeds worse (docs/planes.md).
-  bool enabled = false;
+  /// On: the mode only comes on where features run out, and there planes measure what the few
+  /// features left measure worst (docs/planes.md has the held-out corridors).
+  bool enabled = true;
   /// Below this many inliers a frame has "run out of features"; the keyframe rule's
-  /// few-inlier threshold, so fr1/xyz and textured corridors (hundreds) never switch the mode on.
+  /// few-inlier threshold, so fr1/xyz and textured corridors (hundreds) hardly ever switch the
+  /// mode on.
   int corridor_min_inliers = 50;
   int corridor_exit_frames = 30;
   /// Plane ICP takes its samples as independent, so its information overstates what it knows.
   double information_scale = 0.1;
   double gate_probability = 0.999;
   int points_per_plane = 200;
-  /// Off: only the translation the planes measure is fused, their rotation marginalised out. A
-  /// door that grows into its wall's plane tilts it by up to a degree (docs/planes.md), a bias no
-  /// gate sees, while vanishing points and features measure the rotation without it.
-  bool fuse_rotation = false;
+  /// On: two walls' normals fix the rotation wherever the mode is on, where the few features
+  /// left measure it worst (up to a degree a frame facing a corridor's end). Off: only the
+  /// translation is fused, the rotation marginalised out; a door that grows into its wall's
+  /// plane tilts it (docs/planes.md), but against the reference that bias is the same in every
+  /// frame and does not add up.
+  bool fuse_rotation = true;
 
   static const ConfigSchema<PlaneOdometryConfig>& schema();
   static PlaneOdometryConfig load(Config& config);
