@@ -26,6 +26,11 @@
 // per-frame error in the measured directions (err_p50/p95_mm, err_p50/p95/max_deg), and after 300
 // frames the chained estimate's rotation error (end_rot_deg) and offset across the corridor
 // (end_across_m).
+//
+// BM_PlaneMapRebuild/<keyframes>: PlaneMap's rebuild of the world planes after a correction that
+// moves every keyframe, with that many keyframes of the textured 33 m corridor (every 4th frame of
+// the zigzag walk, Kinect v1 model, true poses). Counters: rebuild_ms (CPU), keyframe_planes,
+// world_planes. How the mapping thread's cost of following a correction grows with the map.
 
 #include <algorithm>
 #include <cmath>
@@ -42,6 +47,7 @@
 #include "slamd/common/config.hpp"
 #include "slamd/common/latency_histogram.hpp"
 #include "slamd/common/time.hpp"
+#include "slamd/planes/plane_map.hpp"
 #include "slamd/planes/plane_registration.hpp"
 #include "slamd/planes/plane_segmenter.hpp"
 #include "slamd/synth/synthetic_source.hpp"
@@ -235,6 +241,49 @@ void BM_PlaneOdometryCorridor(benchmark::State& state) {
   }
 }
 BENCHMARK(BM_PlaneOdometryCorridor)->Arg(0)->Arg(1)->Iterations(1)->Unit(benchmark::kMillisecond);
+
+void BM_PlaneMapRebuild(benchmark::State& state) {
+  const int keyframes = static_cast<int>(state.range(0));
+  constexpr int kFrameStep = 4;
+  slamd::Config config;
+  config.applyOverride("synthetic.corridor_length_m=33");
+  config.applyOverride("synthetic.trajectory=zigzag");
+  const slamd::SyntheticSource source("corridor", slamd::SyntheticConfig::load(config));
+  const slamd::Trajectory truth = *source.groundTruth();
+  if (static_cast<std::size_t>(keyframes * kFrameStep) > truth.size()) {
+    state.SkipWithError("the walk has fewer frames than asked for");
+    return;
+  }
+  slamd::planes::PlaneSegmenter segmenter;
+  slamd::planes::PlaneMap map;
+  std::vector<std::pair<std::int64_t, slamd::SE3>> poses;
+  for (int k = 0; k < keyframes; ++k) {
+    const int index = k * kFrameStep;
+    const slamd::SE3& T_world_camera = truth[static_cast<std::size_t>(index)].T_world_camera;
+    map.addKeyframe(k, T_world_camera, segmenter.segment(*source.renderFrame(index)).planes);
+    poses.emplace_back(k, T_world_camera);
+  }
+  std::vector<double> rebuild_ms;
+  double shift_m = 0.0;
+  for (auto _ : state) {
+    // A correction: every keyframe moves by a millimetre (alternating, so each rebuild is real).
+    shift_m = shift_m > 0.0 ? 0.0 : 0.001;
+    for (auto& [id, T] : poses) T.translation().x() += shift_m > 0.0 ? 0.001 : -0.001;
+    map.setKeyframePoses(poses);
+    const double start_ms = slamd::threadCpuMs();
+    benchmark::DoNotOptimize(map.worldPlanes().size());
+    rebuild_ms.push_back(slamd::threadCpuMs() - start_ms);
+  }
+  state.counters["rebuild_ms"] = slamd::percentile(rebuild_ms, 50.0);
+  state.counters["keyframe_planes"] = static_cast<double>(map.keyframePlaneCount());
+  state.counters["world_planes"] = static_cast<double>(map.worldPlanes().size());
+}
+BENCHMARK(BM_PlaneMapRebuild)
+    ->Arg(25)
+    ->Arg(100)
+    ->Arg(250)
+    ->Iterations(3)
+    ->Unit(benchmark::kMillisecond);
 
 }  // namespace
 
