@@ -50,7 +50,7 @@ void PoseEstimator::fusePlaneOdometry(
   // (The first frame has no motion to fuse: it only defines the world frame.)
   const bool measured =
       odometry.tracking_state == TrackingState::kOk && odometry.ref_utime > 0 && last_utime_ > 0;
-  if (!planes || !measured) {
+  if (!measured) {
     previous_reference_pose_.reset();
     previous_planes_.reset();
     // A keyframe is a reference whatever measured it (the first frame of a segment too).
@@ -58,6 +58,21 @@ void PoseEstimator::fusePlaneOdometry(
       plane_anchors_.push_back(PlaneAnchor{odometry.utime, 0, SE3::Identity(), planes});
       if (plane_anchors_.size() > kMaxPlaneAnchors) plane_anchors_.pop_front();
     }
+    return;
+  }
+  // The previous frame's pose relative to this frame's reference: as given to the filter when it
+  // had the same reference, else tracking's.
+  const bool same_reference = previous_reference_pose_ &&
+                              previous_reference_pose_->utime == odometry.prev_utime &&
+                              previous_reference_pose_->ref_utime == odometry.ref_utime;
+  const SE3 T_ref_prev = same_reference ? previous_reference_pose_->T_ref_frame
+                                        : odometry.T_ref_curr * odometry.T_prev_curr.inverse();
+  if (!planes) {
+    // Not segmented: tracking's increment, which carries the correction the previous frame had
+    // on (returning to tracking's T_ref_curr would undo it within one frame).
+    previous_reference_pose_ = ReferencePose{odometry.utime, odometry.ref_utime,
+                                             normalizedSE3(T_ref_prev * odometry.T_prev_curr)};
+    previous_planes_.reset();
     return;
   }
   const Utime ref_utime = odometry.ref_utime;
@@ -118,14 +133,14 @@ void PoseEstimator::fusePlaneOdometry(
     }
   }
 
-  // The increment is the step between the two frames' poses relative to the reference: the
-  // previous frame's as given to the filter when it had the same reference, else tracking's.
-  const bool same_reference = previous_reference_pose_ &&
-                              previous_reference_pose_->utime == odometry.prev_utime &&
-                              previous_reference_pose_->ref_utime == ref_utime;
-  const SE3 T_ref_prev = same_reference ? previous_reference_pose_->T_ref_frame
-                                        : odometry.T_ref_curr * odometry.T_prev_curr.inverse();
-  if (fused || same_reference) input.T_prev_curr = normalizedSE3(T_ref_prev.inverse() * T_ref_curr);
+  // A fused frame's increment is the step from the previous frame's pose to the fused one, both
+  // relative to the reference. A frame not fused (gated, or no anchor) keeps tracking's increment
+  // and with it the previous frame's correction, as above.
+  if (fused) {
+    input.T_prev_curr = normalizedSE3(T_ref_prev.inverse() * T_ref_curr);
+  } else {
+    T_ref_curr = normalizedSE3(T_ref_prev * odometry.T_prev_curr);
+  }
   previous_reference_pose_ = ReferencePose{odometry.utime, ref_utime, T_ref_curr};
 
   PlaneAnchor self{odometry.utime, ref_utime, T_ref_curr, planes};

@@ -240,6 +240,29 @@ TEST_F(PoseEstimatorPlaneFusion, PlanesCorrectWhatTheyMeasureAgainstTheKeyframe)
   EXPECT_EQ(estimator_.corridorMode().gated.load(), 0u);
 }
 
+TEST_F(PoseEstimatorPlaneFusion, AFrameWithoutPlanesKeepsTheCorrectionAndTheNextOneIsFusedAgain) {
+  constexpr int kUnsegmented = 6;
+  EstimatedPacket previous;
+  for (int k = 0; k < kFrames; ++k) {
+    SCOPED_TRACE("frame " + std::to_string(k));
+    TrackedPacket packet = frame(k, /*segmented=*/k != kUnsegmented);
+    const SE3 tracked_increment = packet.odometry->T_prev_curr;
+    const EstimatedPacket out = estimator_.process(std::move(packet));
+    const Eigen::Vector3d error =
+        out.pose.T_world_camera.translation() - trueFromKeyframe(k).translation();
+    if (k == kUnsegmented) {
+      // Tracking's increment from the previous (fused) pose: no jump back to tracking's pose
+      // relative to the keyframe, which would undo the previous frame's correction at once.
+      const SE3 step = previous.pose.T_world_camera.inverse() * out.pose.T_world_camera;
+      EXPECT_LT((step.translation() - tracked_increment.translation()).norm(), 1e-6);
+    } else {
+      EXPECT_LT(error.head<2>().norm(), 0.002);
+    }
+    previous = out;
+  }
+  EXPECT_EQ(estimator_.corridorMode().fused.load(), static_cast<std::uint64_t>(kFrames - 2));
+}
+
 TEST_F(PoseEstimatorPlaneFusion, WithoutTheKeyframesPlanesTheFirstSegmentedFrameIsTheAnchor) {
   // The mode came on after the keyframe: frames 0-2 are not segmented, frame 3 is the first.
   constexpr int kAnchor = 3;
