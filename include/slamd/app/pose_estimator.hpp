@@ -20,11 +20,13 @@
 // of T_ref_curr is fused with tracking's (T_ref_curr, covariance_ref_curr) by information
 // (fuseMotion): what the planes measure (across a corridor) comes from them, what they leave free
 // (along it) stays tracking's. The filter's increment is then the step between the fused
-// T_ref_prev and T_ref_curr. Fusing against the reference rather than the previous frame keeps
-// the plane errors from adding up: like tracking's own, successive frames' errors against one
-// reference cancel in the increments instead of accumulating frame by frame (docs/planes.md).
-// Unless filter.planes.fuse_rotation, only the translation is fused, the rotation marginalised
-// out. A plane measurement that disagrees with tracking's beyond the gate is not fused (counted).
+// T_ref_prev and T_ref_curr; a frame not fused keeps tracking's increment, so the previous
+// frame's correction carries on instead of being undone at once. Fusing against the reference
+// rather than the previous frame keeps the plane errors from adding up: like tracking's own,
+// successive frames' errors against one reference cancel in the increments instead of accumulating
+// frame by frame (docs/planes.md). Unless filter.planes.fuse_rotation, only the translation is
+// fused, the rotation marginalised out. A plane measurement that disagrees with tracking's beyond
+// the gate is not fused (counted).
 //
 // No threads inside; owned by the filter thread. process() never throws on bad data.
 
