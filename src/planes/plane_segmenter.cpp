@@ -125,6 +125,11 @@ bool PlaneSegmenter::acceptable(const Fit& fit) const {
 PlaneSegmenter::PlaneSegmenter(const PlaneSegmenterParams& params) : params_(params) {
   const std::string error = params_.validationError();
   if (!error.empty()) throw std::invalid_argument("PlaneSegmenterParams: " + error);
+  // OpenCV builds its 8-bit Lab tables on the first conversion, and two threads converting for
+  // the first time at once can both build them (one set is then leaked). Segmenters are made
+  // before the threads that use them start, so converting one pixel here builds them once.
+  cv::Mat one_pixel_lab;
+  cv::cvtColor(cv::Mat(1, 1, CV_8UC3, cv::Scalar(0, 0, 0)), one_pixel_lab, cv::COLOR_BGR2Lab);
 }
 
 const PlaneSegmentation& PlaneSegmenter::segment(const RgbdFrame& frame) {
