@@ -264,11 +264,11 @@ void BM_PlaneMapRebuild(benchmark::State& state) {
     poses.emplace_back(k, T_world_camera);
   }
   std::vector<double> rebuild_ms;
-  double shift_m = 0.0;
+  double shift_m = 0.001;
   for (auto _ : state) {
-    // A correction: every keyframe moves by a millimetre (alternating, so each rebuild is real).
-    shift_m = shift_m > 0.0 ? 0.0 : 0.001;
-    for (auto& [id, T] : poses) T.translation().x() += shift_m > 0.0 ? 0.001 : -0.001;
+    // A correction: every keyframe moves by a millimetre, back and forth, so each rebuild is real.
+    for (auto& [id, T] : poses) T.translation().x() += shift_m;
+    shift_m = -shift_m;
     map.setKeyframePoses(poses);
     const double start_ms = slamd::threadCpuMs();
     benchmark::DoNotOptimize(map.worldPlanes().size());

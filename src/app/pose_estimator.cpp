@@ -60,22 +60,22 @@ void PoseEstimator::fusePlaneOdometry(
     }
     return;
   }
+  const Utime ref_utime = odometry.ref_utime;
   // The previous frame's pose relative to this frame's reference: as given to the filter when it
   // had the same reference, else tracking's.
   const bool same_reference = previous_reference_pose_ &&
                               previous_reference_pose_->utime == odometry.prev_utime &&
-                              previous_reference_pose_->ref_utime == odometry.ref_utime;
+                              previous_reference_pose_->ref_utime == ref_utime;
   const SE3 T_ref_prev = same_reference ? previous_reference_pose_->T_ref_frame
                                         : odometry.T_ref_curr * odometry.T_prev_curr.inverse();
   if (!planes) {
     // Not segmented: tracking's increment, which carries the correction the previous frame had
     // on (returning to tracking's T_ref_curr would undo it within one frame).
-    previous_reference_pose_ = ReferencePose{odometry.utime, odometry.ref_utime,
-                                             normalizedSE3(T_ref_prev * odometry.T_prev_curr)};
+    previous_reference_pose_ =
+        ReferencePose{odometry.utime, ref_utime, normalizedSE3(T_ref_prev * odometry.T_prev_curr)};
     previous_planes_.reset();
     return;
   }
-  const Utime ref_utime = odometry.ref_utime;
   // The anchor: the reference itself when it was segmented, else the first segmented frame
   // measured from it, whose pose relative to the reference is known.
   const PlaneAnchor* anchor = nullptr;
