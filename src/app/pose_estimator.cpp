@@ -2,6 +2,7 @@
 
 #include <cmath>
 
+#include "slamd/common/log.hpp"
 #include "slamd/filter/motion_fusion.hpp"
 #include "slamd/planes/plane_registration.hpp"
 
@@ -119,6 +120,23 @@ void PoseEstimator::fusePlaneOdometry(
       const MotionFusionResult fusion = fuseMotion(
           odometry.T_ref_curr, odometry.covariance_ref_curr * scale,
           T_ref_anchor * icp.T_target_source, information, config_.planes.gate_probability);
+      if (logLevel() <= LogLevel::kDebug) {
+        // How far the planes' T_ref_curr is from tracking's, in tracking's camera frame.
+        const Vector6d disagreement =
+            logSE3(odometry.T_ref_curr.inverse() * T_ref_anchor * icp.T_target_source);
+        SLAMD_LOG_DEBUG("filter") << "plane increment " << odometry.utime << " (reference "
+                                  << ref_utime << ", "
+                                  << (odometry.stats.used_dense_alignment
+                                          ? std::string("dense alignment")
+                                          : std::to_string(odometry.stats.num_inliers) + " inliers")
+                                  << "): " << (fusion.fused ? "fused" : "not fused") << ", NIS "
+                                  << fusion.nis << " of " << fusion.gate_chi2 << " over "
+                                  << fusion.measured_directions
+                                  << " directions; planes - tracking: rotation "
+                                  << disagreement.tail<3>().transpose() * 180.0 / M_PI
+                                  << " deg, translation "
+                                  << disagreement.head<3>().transpose() * 1000.0 << " mm";
+      }
       if (fusion.fused) {
         fused = true;
         T_ref_curr = fusion.T_prev_curr;
