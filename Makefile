@@ -2,7 +2,8 @@
 #   make run    (installs dependencies, builds, runs slamd on a built-in synthetic world)
 #   make test   (installs dependencies, builds, runs every test, then the concurrency tests
 #                under ThreadSanitizer and every test under AddressSanitizer + UBSan)
-# Other targets: deps, build, bench, bench-corridors, soak, tsan, asan, ubsan, asan-ubsan, fuzz, clean.
+# Other targets: deps, build, bench, bench-corridors, bench-corridors-plain, soak, tsan, asan,
+# ubsan, asan-ubsan, fuzz, clean.
 
 BUILD_DIR ?= build
 JOBS ?= 2
@@ -11,7 +12,7 @@ CMAKE_ARGS ?=
 WERROR ?= OFF
 CTEST_ARGS ?=
 
-.PHONY: all deps build test unit-test run bench bench-corridors soak tsan asan ubsan asan-ubsan fuzz clean
+.PHONY: all deps build test unit-test run bench bench-corridors bench-corridors-plain soak tsan asan ubsan asan-ubsan fuzz clean
 
 all: build
 
@@ -39,6 +40,11 @@ bench: build
 # posed, keyframes per metre, worst per-frame rotation (out/bench/corridors/results.md).
 bench-corridors: build
 	@bash scripts/bench-corridors.sh $(BUILD_DIR)
+
+# Issue 23's plain corridors (texture density 0.04, no posters, zigzag walks) on the evaluation
+# seeds 9101-9106: ATE, end yaw, worst rotation (out/bench/corridors-plain/results.md).
+bench-corridors-plain: build
+	@CORRIDOR_SUITE=plain bash scripts/bench-corridors.sh $(BUILD_DIR)
 
 # fr1/xyz played forward and backward 10 times in real time (4.4 min): memory, keyframes, map
 # size and latency over time (out/soak/soak.json, soak.svg).

@@ -12,19 +12,40 @@
 # (ATE <= 0.03 m and <= 0.2% of distance, every frame posed, no frame-to-frame rotation error
 # above 1 deg, at most one keyframe per 0.3 m).
 #
-# Seeds: 2001.. are the evaluation set (docs/evaluation.md); tuning happens on 1001.. only.
-# Environment: CORRIDOR_SEEDS ("2001 2002 ..."), CORRIDOR_WALKS ("zigzag robot"),
-# SLAMD_BENCH_OUT (out/bench; results go to its corridors/ folder), CORRIDOR_SETS (extra
-# --set assignments for every run, e.g. "tracking.frontend=fovis"), CORRIDOR_REPORT_ONLY=1
-# (only rebuild the tables from the runs already in the output folder).
-# Writes corridors/results.json, corridors/results.md and per-run folders.
+#
+# CORRIDOR_SUITE=plain (`make bench-corridors-plain`) runs issue 23's plain corridors instead:
+# walls with texture density 0.04, no posters, no variety, zigzag walks, and marks issue 23's
+# targets (ATE <= 0.3 m and <= 1% of distance, every frame posed, end yaw error <= 0.5 deg).
+# Both suites also report the worst rotation error of any frame against the first (all three
+# axes; on plain corridors the walk's far end, where one plain wall is all there is to see).
+#
+# Seeds: 2001.. are the evaluation set of the textured suite (docs/evaluation.md), 9101.. of the
+# plain one (5001-9012 have been looked at: docs/planes.md); tuning happens on 1001.. only.
+# Environment: CORRIDOR_SUITE (textured | plain), CORRIDOR_SEEDS ("2001 2002 ..."),
+# CORRIDOR_WALKS ("zigzag robot"; plain: "zigzag"), SLAMD_BENCH_OUT (out/bench; results go to its
+# corridors/ or corridors-plain/ folder), CORRIDOR_SETS (extra --set assignments for every run,
+# e.g. "tracking.frontend=fovis"), CORRIDOR_REPORT_ONLY=1 (only rebuild the tables from the runs
+# already in the output folder).
+# Writes results.json, results.md and per-run folders.
 set -euo pipefail
 BUILD_DIR=$(cd "${1:-build}" && pwd)
 BIN="$BUILD_DIR/bin"
 ROOT=$(cd "$(dirname "$0")/.." && pwd)
-OUT=${SLAMD_BENCH_OUT:-$ROOT/out/bench}/corridors
-SEEDS=${CORRIDOR_SEEDS:-"2001 2002 2003 2004 2005 2006"}
-WALKS=${CORRIDOR_WALKS:-"zigzag robot"}
+SUITE=${CORRIDOR_SUITE:-textured}
+case "$SUITE" in
+  textured)
+    OUT=${SLAMD_BENCH_OUT:-$ROOT/out/bench}/corridors
+    SEEDS=${CORRIDOR_SEEDS:-"2001 2002 2003 2004 2005 2006"}
+    WALKS=${CORRIDOR_WALKS:-"zigzag robot"}
+    suite_sets=(--set synthetic.variety=true) ;;
+  plain)
+    OUT=${SLAMD_BENCH_OUT:-$ROOT/out/bench}/corridors-plain
+    SEEDS=${CORRIDOR_SEEDS:-"9101 9102 9103 9104 9105 9106"}
+    WALKS=${CORRIDOR_WALKS:-"zigzag"}
+    suite_sets=(--set synthetic.variety=false --set synthetic.texture_density=0.04
+                --set synthetic.posters=false) ;;
+  *) echo "bench-corridors: CORRIDOR_SUITE is textured or plain, not $SUITE" >&2; exit 1 ;;
+esac
 mkdir -p "$OUT"
 
 run_case() {  # NAME SEED WALK
@@ -42,7 +63,7 @@ run_case() {  # NAME SEED WALK
   local start end
   start=$(date +%s.%N)
   "$BIN/slamd" --config "$ROOT/config/synthetic.yaml" --source synthetic:corridor \
-    --set synthetic.variety=true --set "synthetic.seed=$seed" "${walk_sets[@]}" \
+    "${suite_sets[@]}" --set "synthetic.seed=$seed" "${walk_sets[@]}" \
     --set backend.enabled=true "${extra[@]}" --lcm-url memq:// --log-level warn \
     --trajectory-out "$dir/trajectory.txt" --groundtruth-out "$dir/groundtruth.txt" \
     --metrics-out "$dir/metrics.json" 2> "$dir/slamd.log" || {
@@ -62,11 +83,11 @@ if [ "${CORRIDOR_REPORT_ONLY:-0}" != 1 ]; then
   done
 fi
 
-python3 - "$OUT" $SEEDS -- $WALKS <<'EOF'
+python3 - "$OUT" "$SUITE" $SEEDS -- $WALKS <<'EOF'
 import json, math, os, sys
-out = sys.argv[1]
+out, suite = sys.argv[1], sys.argv[2]
 split = sys.argv.index("--")
-seeds, walks = sys.argv[2:split], sys.argv[split + 1:]
+seeds, walks = sys.argv[3:split], sys.argv[split + 1:]
 
 def read_tum(path):
     """{timestamp rounded to 0.1 ms: (position, rotation matrix)} of a TUM trajectory."""
@@ -124,6 +145,17 @@ def end_yaw_error_deg(truth, estimate):
     w = rotation_vector(error)
     return math.degrees(sum(w[i] * up_in_first_camera[i] for i in range(3)))
 
+def worst_rotation_error_deg(truth, estimate):
+    """The largest rotation error of any frame against the first frame both have (all three
+    axes): drift that later corrections may take out again, which the end error does not show."""
+    stamps = sorted(stamp for stamp in truth if stamp in estimate)
+    if len(stamps) < 2:
+        return None
+    first = stamps[0]
+    return max(angle_deg(relative_rotation(relative_rotation(truth[first][1], truth[s][1]),
+                                           relative_rotation(estimate[first][1], estimate[s][1])))
+               for s in stamps[1:])
+
 rows = []
 for seed in seeds:
     for walk in walks:
@@ -167,34 +199,43 @@ for seed in seeds:
                 rotation_errors[len(rotation_errors) // 2] if rotation_errors else None,
             "frames_over_1deg": sum(1 for e in rotation_errors if e > 1.0),
             "end_yaw_error_deg": end_yaw_error_deg(truth, estimate),
+            "worst_rotation_deg": worst_rotation_error_deg(truth, estimate),
             "dense_aligned_frames": find(metrics, "dense_aligned_frames") or 0,
             "rpe_1frame_rotation_rmse_deg": rpe["rotation"]["rmse"],
             "wall_s": wall_s,
             "drawn": metrics.get("source_description", "").partition("variety: ")[2],
         }
-        row["targets"] = {
-            "ate": ate_m <= 0.03 and row["ate_percent"] <= 0.2,
-            "every_frame_posed": posed >= gt_frames,
-            "rotation": (row["worst_frame_rotation_deg"] or 0.0) <= 1.0,
-            "keyframes": keyframes <= distance_m / 0.3,
-        }
+        if suite == "plain":  # issue 23
+            row["targets"] = {
+                "ate": ate_m <= 0.3 and row["ate_percent"] <= 1.0,
+                "every_frame_posed": posed >= gt_frames,
+                "end_yaw": abs(row["end_yaw_error_deg"] or 0.0) <= 0.5,
+            }
+        else:  # issue 22
+            row["targets"] = {
+                "ate": ate_m <= 0.03 and row["ate_percent"] <= 0.2,
+                "every_frame_posed": posed >= gt_frames,
+                "rotation": (row["worst_frame_rotation_deg"] or 0.0) <= 1.0,
+                "keyframes": keyframes <= distance_m / 0.3,
+            }
         rows.append(row)
 json.dump(rows, open(os.path.join(out, "results.json"), "w"), indent=1)
 
 def mark(ok): return "" if ok else " ✗"
-lines = ["| case | distance m | ATE m | ATE % | posed | worst frame rotation error deg (frames over 1 deg) | end yaw error deg | m per keyframe | keyframes/s | dense frames | wall s |",
-         "|---|---|---|---|---|---|---|---|---|---|---|"]
+lines = ["| case | distance m | ATE m | ATE % | posed | worst frame rotation error deg (frames over 1 deg) | end yaw error deg | worst rotation error deg | m per keyframe | keyframes/s | dense frames | wall s |",
+         "|---|---|---|---|---|---|---|---|---|---|---|---|"]
 for r in rows:
     if "error" in r:
-        lines.append(f"| {r['case']} | failed: {r['error']} |||||||||")
+        lines.append(f"| {r['case']} | failed: {r['error']} ||||||||||")
         continue
     t = r["targets"]
     lines.append(
         f"| {r['case']} | {r['distance_m']:.1f} | {r['ate_m']:.4f}{mark(t['ate'])} | "
         f"{r['ate_percent']:.3f} | {r['frames_posed']}/{r['frames']}{mark(t['every_frame_posed'])} | "
-        f"{r['worst_frame_rotation_deg'] or 0:.2f}{mark(t['rotation'])} ({r['frames_over_1deg']} > 1) | "
-        f"{r['end_yaw_error_deg'] or 0:.2f} | "
-        f"{(r['metres_per_keyframe'] or 0):.3f}{mark(t['keyframes'])} | {r['keyframes_per_s']:.2f} | "
+        f"{r['worst_frame_rotation_deg'] or 0:.2f}{mark(t.get('rotation', True))} ({r['frames_over_1deg']} > 1) | "
+        f"{r['end_yaw_error_deg'] or 0:.2f}{mark(t.get('end_yaw', True))} | "
+        f"{r['worst_rotation_deg'] or 0:.2f} | "
+        f"{(r['metres_per_keyframe'] or 0):.3f}{mark(t.get('keyframes', True))} | {r['keyframes_per_s']:.2f} | "
         f"{r['dense_aligned_frames']} | {r['wall_s']:.0f} |")
 ok = [r for r in rows if "error" not in r]
 passed = sum(all(r["targets"].values()) for r in ok)
