@@ -117,13 +117,13 @@ void PoseEstimator::fusePlaneOdometry(
       // The EKF scales the odometry covariance by odometry_covariance_scale; fusing against the
       // scaled one weighs the two as the filter will.
       const double scale = config_.odometry_covariance_scale;
-      const MotionFusionResult fusion = fuseMotion(
-          odometry.T_ref_curr, odometry.covariance_ref_curr * scale,
-          T_ref_anchor * icp.T_target_source, information, config_.planes.gate_probability);
+      const SE3 T_ref_curr_planes = T_ref_anchor * icp.T_target_source;
+      const MotionFusionResult fusion =
+          fuseMotion(odometry.T_ref_curr, odometry.covariance_ref_curr * scale, T_ref_curr_planes,
+                     information, config_.planes.gate_probability);
       if (logLevel() <= LogLevel::kDebug) {
         // How far the planes' T_ref_curr is from tracking's, in tracking's camera frame.
-        const Vector6d disagreement =
-            logSE3(odometry.T_ref_curr.inverse() * T_ref_anchor * icp.T_target_source);
+        const Vector6d disagreement = logSE3(odometry.T_ref_curr.inverse() * T_ref_curr_planes);
         SLAMD_LOG_DEBUG("filter") << "plane increment " << odometry.utime << " (reference "
                                   << ref_utime << ", "
                                   << (odometry.stats.used_dense_alignment
