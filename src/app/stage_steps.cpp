@@ -380,7 +380,10 @@ void MappingStep::catchUp(std::int64_t cycle_start_ns) {
   // of this frame's budget, so that this stage's time per frame stays bounded however large the
   // map and the correction are.
   const double spent_s = 1e-9 * static_cast<double>(steadyNowNs() - cycle_start_ns);
-  const CatchUpResult moved = mapper_.catchUp(step_budget_s_ - spent_s);
+  // At least one step a cycle, however late the cycle is: a machine too loaded for the rest of
+  // the cycle to fit the budget must still see the map follow a correction, a part a frame.
+  constexpr double kOneStepBudgetS = 1e-9;
+  const CatchUpResult moved = mapper_.catchUp(std::max(step_budget_s_ - spent_s, kOneStepBudgetS));
   if (moved.caught_up) {
     SLAMD_LOG_DEBUG(kLog) << "map caught up with the corrections ("
                           << mapper_.stats().keyframes_moved << " keyframe moves so far)";
