@@ -187,8 +187,14 @@ class LevelAligner {
       dX.rightCols<3>() = skew(y);
       if (s.photometric) {
         const double r = sampleBilinear(curr_.gray, u, v) - s.intensity;
-        const double gu = sampleBilinear(curr_.grad_x, u, v);
-        const double gv = sampleBilinear(curr_.grad_y, u, v);
+        double gu = sampleBilinear(curr_.grad_x, u, v);
+        double gv = sampleBilinear(curr_.grad_y, u, v);
+        if (measured_gradient_axis_) {  // keep only the flow component the gradients measure
+          const Eigen::Vector2d& a = *measured_gradient_axis_;
+          const double along = gu * a.x() + gv * a.y();
+          gu = along * a.x();
+          gv = along * a.y();
+        }
         const double inv_z = 1.0 / y.z();
         const Eigen::RowVector3d dI_dX(gu * K.fx * inv_z, gv * K.fy * inv_z,
                                        -(gu * K.fx * y.x() + gv * K.fy * y.y()) * inv_z * inv_z);
@@ -235,9 +241,24 @@ class LevelAligner {
     if (free_translations_ref_.size() == 2) free_rotation_ref_ = axes.col(2);
   }
 
+  /// The photometric residuals measure the image motion along each pixel's gradient only (the
+  /// aperture problem). When the gradients all but share one orientation (one straight edge, a
+  /// door's jamb, with a few specks), the motion across it is measured by the edge's ends and the
+  /// specks alone, whose cost is flat a pixel away and whose curvature claims a precision they
+  /// do not have: the Jacobians then keep only their component along the dominant gradient.
+  void findMeasuredGradientAxis(const Eigen::Matrix2d& gradient_scatter) {
+    const double total = gradient_scatter.trace();
+    if (!(total > 0.0)) return;
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eigen(gradient_scatter);
+    if (eigen.eigenvalues()(0) / total < options_.min_gradient_share) {
+      measured_gradient_axis_ = eigen.eigenvectors().col(1);
+    }
+  }
+
   void collectSamples() {
     const cv::Mat& depth = ref_.depth_m;
     Eigen::Matrix3d normal_scatter = Eigen::Matrix3d::Zero();
+    Eigen::Matrix2d gradient_scatter = Eigen::Matrix2d::Zero();
     int valid = 0;
     for (int v = 1; v < depth.rows - 1; ++v) {
       const float* row = depth.ptr<float>(v);
@@ -258,8 +279,12 @@ class LevelAligner {
         if (index++ % step != 0) continue;
         const double gu = gx[u], gv = gy[u];
         const double gradient_sq = gu * gu + gv * gv;
-        samples_.push_back({ref_.K.backProject(u, v, row[u]), static_cast<double>(gray[u]),
-                            gradient_sq >= min_gradient_sq});
+        const bool photometric = gradient_sq >= min_gradient_sq;
+        samples_.push_back(
+            {ref_.K.backProject(u, v, row[u]), static_cast<double>(gray[u]), photometric});
+        if (photometric) {
+          gradient_scatter += Eigen::Vector2d(gu, gv) * Eigen::Vector2d(gu, gv).transpose();
+        }
         const cv::Vec3f& n = ref_.normals.at<cv::Vec3f>(v, u);
         if (std::isnan(n[0])) continue;
         const Eigen::Vector3d normal(static_cast<double>(n[0]), static_cast<double>(n[1]),
@@ -268,6 +293,7 @@ class LevelAligner {
       }
     }
     findFreeDirections(normal_scatter);
+    findMeasuredGradientAxis(gradient_scatter);
   }
 
   const DenseFrame::Level& ref_;
@@ -275,8 +301,9 @@ class LevelAligner {
   double gate_m_;
   const DenseAlignmentOptions& options_;
   std::vector<Sample> samples_;
-  std::vector<Eigen::Vector3d> free_translations_ref_;  ///< unit, reference frame
-  std::optional<Eigen::Vector3d> free_rotation_ref_;    ///< unit axis, reference frame
+  std::vector<Eigen::Vector3d> free_translations_ref_;     ///< unit, reference frame
+  std::optional<Eigen::Vector3d> free_rotation_ref_;       ///< unit axis, reference frame
+  std::optional<Eigen::Vector2d> measured_gradient_axis_;  ///< unit, image; set when one dominates
 };
 
 bool sameShape(const DenseFrame& a, const DenseFrame& b) {

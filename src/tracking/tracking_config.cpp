@@ -151,6 +151,11 @@ const ConfigSchema<TrackingConfig>& TrackingConfig::schema() {
                   "finest pyramid level aligned (0 = full resolution, 1 = half); < dense_levels")
           .number("dense_min_gradient", &C::dense_min_gradient, 0.0, 255.0, "grey levels/px",
                   "pixels with a weaker image gradient carry no photometric residual")
+          .number("dense_min_gradient_share", &C::dense_min_gradient_share, 0.0, 0.5, "",
+                  "when the weaker axis of the photometric pixels' gradient scatter holds less "
+                  "than this share of it (one straight edge with its ends and a few specks), the "
+                  "image motion along that axis is not measured (the aperture problem); 0 = off "
+                  "(docs/planes.md: what 0.05 did on plain corridors)")
           .number("motion_prior_sigma_mps", &C::motion_prior_sigma_mps, 0.001, 100.0, "m/s",
                   "uncertainty of the constant-velocity prior's speed: the prior's translation "
                   "sigma is this times the time since the last measured frame. Dense alignment's "

@@ -137,6 +137,55 @@ TEST(DenseAlignment, APlainCorridorLeavesTheTranslationAlongItToThePrior) {
   EXPECT_GT(std::abs(eigen.eigenvectors().col(2).dot(along_curr)), 0.99);
 }
 
+TEST(DenseAlignment, OneEdgeAndAFewSpecksLeaveTheMotionAlongTheEdgeToThePrior) {
+  // A wall seen square on at 2 m: its depth measures the distance and the tilts, not the slides
+  // along it. The image has one vertical edge (the jamb of a door) and a few specks: the edge
+  // measures the sideways slide and the roll, and the motion along it is measured by nothing but
+  // the specks. The curvature of a few specks' cost is not a measurement to trust (it is flat a
+  // pixel away), so the vertical slide stays at the prior and the covariance says so. With the
+  // specks dense enough to be texture, the vertical slide is measured.
+  DenseAlignmentOptions options;
+  options.min_gradient_share = 0.05;
+  CameraIntrinsics K;
+  const cv::Mat depth(K.height, K.width, CV_32FC1, cv::Scalar(2.0F));
+  const auto wallImage = [&](int specks_per_row) {
+    cv::Mat gray(K.height, K.width, CV_8UC1, cv::Scalar(70));
+    gray.colRange(K.width / 2, K.width).setTo(170);
+    for (int row = 0; row < specks_per_row; ++row) {
+      for (int col = 0; col < specks_per_row; ++col) {
+        const cv::Point centre(40 + col * (K.width - 80) / specks_per_row + 7 * row,
+                               40 + row * (K.height - 80) / specks_per_row + 5 * col);
+        cv::circle(gray, centre, 3, cv::Scalar(col % 2 == 0 ? 20 : 230), cv::FILLED);
+      }
+    }
+    cv::GaussianBlur(gray, gray, cv::Size(5, 5), 1.0);
+    return makeDenseFrame(gray, depth, K, options);
+  };
+  const Matrix6d prior_covariance = priorCovariance(0.05, 3.0);
+  Vector6d offset;  // the truth is no motion; the prior is 2 cm off along the edge, 1 cm across
+  offset << 0.01, 0.02, 0.0, 0.0, 0.0, 0.0;
+  const SE3 prior = expSE3(offset);
+
+  const DenseFrame sparse = wallImage(2);
+  const DenseAlignmentResult edge = alignDense(sparse, sparse, prior, prior_covariance, options);
+  ASSERT_TRUE(edge.success) << edge.failure;
+  EXPECT_GT(edge.photometric_residuals, 200);
+  EXPECT_NEAR(edge.T_ref_curr.translation().x(), 0.0, 0.002);   // across the edge: measured
+  EXPECT_NEAR(edge.T_ref_curr.translation().y(), 0.02, 0.002);  // along it: the prior's value
+  EXPECT_GT(edge.covariance(1, 1), 0.5 * prior_covariance(1, 1));
+  EXPECT_LT(edge.covariance(0, 0), 0.01 * prior_covariance(0, 0));
+  EXPECT_EQ(edge.degenerate_directions, 1);
+
+  const DenseFrame textured = wallImage(12);
+  const DenseAlignmentResult texture =
+      alignDense(textured, textured, prior, prior_covariance, options);
+  ASSERT_TRUE(texture.success) << texture.failure;
+  EXPECT_NEAR(texture.T_ref_curr.translation().x(), 0.0, 0.002);
+  EXPECT_NEAR(texture.T_ref_curr.translation().y(), 0.0, 0.002);
+  EXPECT_LT(texture.covariance(1, 1), 0.01 * prior_covariance(1, 1));
+  EXPECT_EQ(texture.degenerate_directions, 0);
+}
+
 TEST(DenseAlignment, InputsThatDoNotFitAreReportedNotThrown) {
   const DenseAlignmentOptions options;
   CameraIntrinsics K;
