@@ -146,6 +146,12 @@ class LevelAligner {
   }
 
   std::size_t numSamples() const { return samples_.size(); }
+  /// The weaker axis's share of the photometric pixels' gradient scatter (0 without any).
+  double gradientShare() const { return gradient_share_; }
+  /// Leaves the level to the depth alone: no photometric residuals.
+  void dropPhotometric() {
+    for (Sample& s : samples_) s.photometric = false;
+  }
 
   /// Robust scale of the photometric residuals at T (median absolute residual).
   double photometricSigma(const SE3& T_ref_curr) const {
@@ -250,7 +256,8 @@ class LevelAligner {
     const double total = gradient_scatter.trace();
     if (!(total > 0.0)) return;
     const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eigen(gradient_scatter);
-    if (eigen.eigenvalues()(0) / total < options_.min_gradient_share) {
+    gradient_share_ = eigen.eigenvalues()(0) / total;
+    if (gradient_share_ < options_.min_gradient_share) {
       measured_gradient_axis_ = eigen.eigenvectors().col(1);
     }
   }
@@ -301,8 +308,9 @@ class LevelAligner {
   double gate_m_;
   const DenseAlignmentOptions& options_;
   std::vector<Sample> samples_;
-  std::vector<Eigen::Vector3d> free_translations_ref_;     ///< unit, reference frame
-  std::optional<Eigen::Vector3d> free_rotation_ref_;       ///< unit axis, reference frame
+  std::vector<Eigen::Vector3d> free_translations_ref_;  ///< unit, reference frame
+  std::optional<Eigen::Vector3d> free_rotation_ref_;    ///< unit axis, reference frame
+  double gradient_share_ = 0.0;  ///< the weaker axis's share of the gradient scatter
   std::optional<Eigen::Vector2d> measured_gradient_axis_;  ///< unit, image; set when one dominates
 };
 
@@ -398,8 +406,11 @@ DenseAlignmentResult alignDense(const DenseFrame& ref, const DenseFrame& curr,
     const std::size_t l = static_cast<std::size_t>(level);
     if (ref.levels[l].normals.empty() || curr.levels[l].normals.empty()) continue;
     const double gate_m = options.max_point_to_plane_m * std::pow(2.0, level - finest);
-    const LevelAligner aligner(ref.levels[l], curr.levels[l], gate_m, options);
+    LevelAligner aligner(ref.levels[l], curr.levels[l], gate_m, options);
     if (aligner.numSamples() == 0) continue;
+    if (level > finest && aligner.gradientShare() < options.min_coarse_gradient_share) {
+      aligner.dropPhotometric();
+    }
     const double photometric_sigma = aligner.photometricSigma(T);
     Evaluation e = aligner.evaluate(T, photometric_sigma);
     double cost = e.cost + priorCost(T);

@@ -151,6 +151,13 @@ const ConfigSchema<TrackingConfig>& TrackingConfig::schema() {
                   "finest pyramid level aligned (0 = full resolution, 1 = half); < dense_levels")
           .number("dense_min_gradient", &C::dense_min_gradient, 0.0, 255.0, "grey levels/px",
                   "pixels with a weaker image gradient carry no photometric residual")
+          .number("dense_min_coarse_gradient_share", &C::dense_min_coarse_gradient_share, 0.0, 1.0,
+                  "",
+                  "a pyramid level coarser than the finest aligns its grey image only when the "
+                  "weaker axis of its photometric pixels' gradient scatter holds at least this "
+                  "share (two orientations); below, depth alone aligns it (one edge and a few "
+                  "specks, downsampled, pull the estimate centimetres off: docs/planes.md). 0 = "
+                  "the grey image at every level")
           .number("dense_min_gradient_share", &C::dense_min_gradient_share, 0.0, 0.5, "",
                   "when the weaker axis of the photometric pixels' gradient scatter holds less "
                   "than this share of it (one straight edge with its ends and a few specks), the "

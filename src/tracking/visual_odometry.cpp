@@ -165,6 +165,7 @@ DenseAlignmentOptions denseOptions(const TrackingConfig& config) {
   options.finest_level = config.dense_finest_level;
   options.min_gradient = config.dense_min_gradient;
   options.min_gradient_share = config.dense_min_gradient_share;
+  options.min_coarse_gradient_share = config.dense_min_coarse_gradient_share;
   options.min_depth_m = config.min_depth_m;
   options.max_depth_m = config.max_depth_m;
   options.depth_sigma_coeff = config.depth_sigma_coeff;

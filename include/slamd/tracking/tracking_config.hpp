@@ -115,6 +115,7 @@ struct TrackingConfig {
   int dense_finest_level = 1;
   double dense_min_gradient = 4.0;
   double dense_min_gradient_share = 0.0;
+  double dense_min_coarse_gradient_share = 0.1;
 
   // --- The motion prior: constant velocity, and how far a frame may depart from it -----------
   /// 1-sigma change of speed (m/s) and turn rate (deg/s) between frames: the prior's sigmas are
