@@ -42,7 +42,7 @@ bench-corridors: build
 	@bash scripts/bench-corridors.sh $(BUILD_DIR)
 
 # Issue 23's plain corridors (texture density 0.04, no posters, zigzag walks) on the evaluation
-# seeds 9101-9106: ATE, end yaw, worst rotation (out/bench/corridors-plain/results.md).
+# seeds 9301-9306: ATE, end yaw, worst rotation (out/bench/corridors-plain/results.md).
 bench-corridors-plain: build
 	@CORRIDOR_SUITE=plain bash scripts/bench-corridors.sh $(BUILD_DIR)
 

@@ -19,8 +19,9 @@
 # Both suites also report the worst rotation error of any frame against the first (all three
 # axes; on plain corridors the walk's far end, where one plain wall is all there is to see).
 #
-# Seeds: 2001.. are the evaluation set of the textured suite (docs/evaluation.md), 9101.. of the
-# plain one (5001-9012 have been looked at: docs/planes.md); tuning happens on 1001.. only.
+# Seeds: 2001.. are the evaluation set of the textured suite (docs/evaluation.md), 9301.. of the
+# plain one (5001-9012, 9101-9106 and 9201-9206 have been looked at: docs/planes.md); tuning
+# happens on 1001.. only.
 # Environment: CORRIDOR_SUITE (textured | plain), CORRIDOR_SEEDS ("2001 2002 ..."),
 # CORRIDOR_WALKS ("zigzag robot"; plain: "zigzag"), SLAMD_BENCH_OUT (out/bench; results go to its
 # corridors/ or corridors-plain/ folder), CORRIDOR_SETS (extra --set assignments for every run,
@@ -40,7 +41,7 @@ case "$SUITE" in
     suite_sets=(--set synthetic.variety=true) ;;
   plain)
     OUT=${SLAMD_BENCH_OUT:-$ROOT/out/bench}/corridors-plain
-    SEEDS=${CORRIDOR_SEEDS:-"9101 9102 9103 9104 9105 9106"}
+    SEEDS=${CORRIDOR_SEEDS:-"9301 9302 9303 9304 9305 9306"}
     WALKS=${CORRIDOR_WALKS:-"zigzag"}
     suite_sets=(--set synthetic.variety=false --set synthetic.texture_density=0.04
                 --set synthetic.posters=false) ;;
