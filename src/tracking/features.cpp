@@ -5,6 +5,7 @@
 #include <cmath>
 #include <limits>
 
+#include <Eigen/Core>
 #include <opencv2/calib3d.hpp>
 #include <opencv2/core/hal/hal.hpp>
 #include <opencv2/imgproc.hpp>
@@ -30,6 +31,37 @@ void sampleSquare(const cv::Mat& image, double x, double y, double (&out)[kSide 
     for (int col = 0; col < kSide; ++col) {
       samples[col] = (1 - ay) * ((1 - ax) * r0[col] + ax * r0[col + 1]) +
                      ay * ((1 - ax) * r1[col] + ax * r1[col + 1]);
+    }
+  }
+}
+
+/// alignPatch's 9x9 patch, padded with zeros to a whole number of 4- and 8-float SIMD packets.
+constexpr int kAlignSide = 9;
+constexpr int kPatchPadded = 88;
+
+/// The 9x9 bilinear samples of a CV_8UC1 image around (x, y) in single precision, row by row,
+/// into the first 81 entries of out (as sampleSquare; the caller keeps them inside the image).
+void samplePatch(const cv::Mat& image, double x, double y, float* out) {
+  const double fx = std::floor(x), fy = std::floor(y);
+  const float ax = static_cast<float>(x - fx), ay = static_cast<float>(y - fy);
+  const int x0 = static_cast<int>(fx) - kAlignSide / 2, y0 = static_cast<int>(fy) - kAlignSide / 2;
+  // Rows interpolated vertically, then horizontally (loops over plain float arrays, which the
+  // compiler turns into SIMD).
+  float upper[kAlignSide + 1], lower[kAlignSide + 1], vertical[kAlignSide + 1];
+  const std::uint8_t* r0 = image.ptr<std::uint8_t>(y0) + x0;
+  for (int col = 0; col <= kAlignSide; ++col) lower[col] = r0[col];
+  for (int row = 0; row < kAlignSide; ++row) {
+    const std::uint8_t* r1 = image.ptr<std::uint8_t>(y0 + row + 1) + x0;
+    for (int col = 0; col <= kAlignSide; ++col) {
+      upper[col] = lower[col];
+      lower[col] = r1[col];
+    }
+    for (int col = 0; col <= kAlignSide; ++col) {
+      vertical[col] = upper[col] + ay * (lower[col] - upper[col]);
+    }
+    float* samples = out + row * kAlignSide;
+    for (int col = 0; col < kAlignSide; ++col) {
+      samples[col] = vertical[col] + ax * (vertical[col + 1] - vertical[col]);
     }
   }
 }
@@ -341,8 +373,8 @@ std::vector<Eigen::Vector2d> undistortPixels(const std::vector<cv::Point2f>& raw
 bool alignPatch(const cv::Mat& templ, const cv::Point2f& templ_px, const cv::Mat& image,
                 const cv::Point2f& initial_px, double max_shift_px, cv::Point2f& aligned_px,
                 const cv::Matx33d& ref_from_curr) {
-  constexpr int kHalf = 4;  // 9x9 patch
-  constexpr int kSide = 2 * kHalf + 1;
+  constexpr int kHalf = kAlignSide / 2;
+  constexpr int kSide = kAlignSide;
   constexpr int kBorder = kHalf + 2;
   constexpr double kMinCorrelation = 0.85;
   auto inside = [](const cv::Mat& img, double x, double y) {
@@ -351,7 +383,7 @@ bool alignPatch(const cv::Mat& templ, const cv::Point2f& templ_px, const cv::Mat
   auto sample = [](const cv::Mat& img, double x, double y) {
     const int x0 = static_cast<int>(x);
     const int y0 = static_cast<int>(y);
-    const double ax = x - x0, ay = y - y0;
+    const float ax = static_cast<float>(x - x0), ay = static_cast<float>(y - y0);
     const std::uint8_t* r0 = img.ptr<std::uint8_t>(y0) + x0;
     const std::uint8_t* r1 = img.ptr<std::uint8_t>(y0 + 1) + x0;
     return (1 - ay) * ((1 - ax) * r0[0] + ax * r0[1]) + ay * ((1 - ax) * r1[0] + ax * r1[1]);
@@ -384,63 +416,66 @@ bool alignPatch(const cv::Mat& templ, const cv::Point2f& templ_px, const cv::Mat
       ty0 + reach > templ.rows - 2) {
     return false;
   }
-  // Template with a one-pixel ring for central-difference gradients.
-  double t[kSide + 2][kSide + 2];
-  for (int dy = -kHalf - 1; dy <= kHalf + 1; ++dy) {
-    for (int dx = -kHalf - 1; dx <= kHalf + 1; ++dx) {
-      double rx = 0.0, ry = 0.0;
-      warp(dx, dy, rx, ry);  // w > 0 inside the convex quadrilateral checked above
-      t[dy + kHalf + 1][dx + kHalf + 1] = sample(templ, tx0 + rx, ty0 + ry);
+  // Template with a one-pixel ring for central-difference gradients. The homography's
+  // numerators and scale are affine in the column offset, so each row starts from its constant.
+  // (w > 0 everywhere inside the convex quadrilateral checked above.)
+  const cv::Matx33d& H = ref_from_curr;
+  constexpr int kRing = kSide + 2;
+  float t[kRing][kRing];
+  for (int row = 0; row < kRing; ++row) {
+    const double dy = row - kHalf - 1;
+    const double x_row = H(0, 1) * dy + H(0, 2), y_row = H(1, 1) * dy + H(1, 2);
+    const double w_row = H(2, 1) * dy + H(2, 2);
+    double xs[kRing], ys[kRing];
+    for (int col = 0; col < kRing; ++col) {
+      const double dx = col - kHalf - 1;
+      const double inverse_w = 1.0 / (H(2, 0) * dx + w_row);
+      xs[col] = tx0 + (H(0, 0) * dx + x_row) * inverse_w;
+      ys[col] = ty0 + (H(1, 0) * dx + y_row) * inverse_w;
     }
+    for (int col = 0; col < kRing; ++col) t[row][col] = sample(templ, xs[col], ys[col]);
   }
   // Zero-mean template and zero-mean gradients (a brightness offset is eliminated by mean
-  // subtraction, so the gradients are centred too), stored flat for the loops below.
-  constexpr int kCount = kSide * kSide;
-  double gx[kCount], gy[kCount], tc[kCount];
+  // subtraction, so the gradients are centred too). The per-iteration sums below run over these
+  // as single-precision vectors (grey levels and their differences need no more), padded with
+  // zeros to whole SIMD packets.
+  using PatchVector = Eigen::Matrix<float, kPatchPadded, 1>;
+  PatchVector gx = PatchVector::Zero(), gy = PatchVector::Zero(), tc = PatchVector::Zero();
   double t_mean = 0.0, gx_mean = 0.0, gy_mean = 0.0;
   for (int y = 0; y < kSide; ++y) {
     for (int x = 0; x < kSide; ++x) {
-      const int k = y * kSide + x;
-      gx[k] = 0.5 * (t[y + 1][x + 2] - t[y + 1][x]);
-      gy[k] = 0.5 * (t[y + 2][x + 1] - t[y][x + 1]);
-      tc[k] = t[y + 1][x + 1];
-      t_mean += tc[k];
-      gx_mean += gx[k];
-      gy_mean += gy[k];
+      const double grad_x = 0.5 * (t[y + 1][x + 2] - t[y + 1][x]);
+      const double grad_y = 0.5 * (t[y + 2][x + 1] - t[y][x + 1]);
+      t_mean += t[y + 1][x + 1];
+      gx_mean += grad_x;
+      gy_mean += grad_y;
     }
   }
+  constexpr int kCount = kSide * kSide;
   t_mean /= kCount;
   gx_mean /= kCount;
   gy_mean /= kCount;
-  double h00 = 0, h01 = 0, h11 = 0;
-  double gx_t = 0, gy_t = 0;  // gradient . zero-mean template
-  for (int k = 0; k < kCount; ++k) {
-    gx[k] -= gx_mean;
-    gy[k] -= gy_mean;
-    tc[k] -= t_mean;
-    h00 += gx[k] * gx[k];
-    h01 += gx[k] * gy[k];
-    h11 += gy[k] * gy[k];
-    gx_t += gx[k] * tc[k];
-    gy_t += gy[k] * tc[k];
+  for (int y = 0; y < kSide; ++y) {
+    for (int x = 0; x < kSide; ++x) {
+      const int k = y * kSide + x;
+      gx[k] = static_cast<float>(0.5 * (t[y + 1][x + 2] - t[y + 1][x]) - gx_mean);
+      gy[k] = static_cast<float>(0.5 * (t[y + 2][x + 1] - t[y][x + 1]) - gy_mean);
+      tc[k] = static_cast<float>(t[y + 1][x + 1] - t_mean);
+    }
   }
+  const double h00 = gx.squaredNorm(), h01 = gx.dot(gy), h11 = gy.squaredNorm();
   const double det = h00 * h11 - h01 * h01;
   if (det < 1e-6 * (h00 + h11) * (h00 + h11) || h00 + h11 < 1.0) return false;
   // Gauss-Newton on the patch position. The gradients sum to zero, so the image's mean drops out of
   // the gradient products.
   double px = initial_px.x, py = initial_px.y;
   bool converged = false;
-  double iv[kCount];
+  PatchVector iv = PatchVector::Zero();
   for (int it = 0; it < 10; ++it) {
     if (!inside(image, px, py)) return false;
-    sampleSquare<kSide>(image, px, py, iv);
-    double b0 = 0, b1 = 0;
-    for (int k = 0; k < kCount; ++k) {
-      b0 += gx[k] * iv[k];
-      b1 += gy[k] * iv[k];
-    }
-    b0 -= gx_t;
-    b1 -= gy_t;
+    samplePatch(image, px, py, iv.data());
+    const PatchVector difference = iv - tc;
+    const double b0 = gx.dot(difference), b1 = gy.dot(difference);
     const double dx = (h11 * b0 - h01 * b1) / det;
     const double dy = (h00 * b1 - h01 * b0) / det;
     px -= dx;
@@ -453,16 +488,9 @@ bool alignPatch(const cv::Mat& templ, const cv::Point2f& templ_px, const cv::Mat
   if (!converged || !inside(image, px, py)) return false;
   // Accept only a patch that really looks like the template (zero-mean normalised correlation,
   // on the last iteration's samples, a hundredth of a pixel away).
-  double i_mean = 0.0;
-  for (int k = 0; k < kCount; ++k) i_mean += iv[k];
-  i_mean /= kCount;
-  double sit = 0, sii = 0, stt = 0;
-  for (int k = 0; k < kCount; ++k) {
-    const double a = iv[k] - i_mean;
-    sit += a * tc[k];
-    sii += a * a;
-    stt += tc[k] * tc[k];
-  }
+  const float i_mean = iv.sum() / kCount;
+  iv.head<kCount>().array() -= i_mean;
+  const double sit = iv.dot(tc), sii = iv.squaredNorm(), stt = tc.squaredNorm();
   if (sii <= 0.0 || stt <= 0.0 || sit / std::sqrt(sii * stt) < kMinCorrelation) return false;
   if (std::hypot(px - static_cast<double>(initial_px.x), py - static_cast<double>(initial_px.y)) >
       max_shift_px) {

@@ -19,6 +19,7 @@ void LocalMap::observationOf(const Keyframe& keyframe, int feature_index, Eigen:
 
 void LocalMap::addKeyframe(const KeyframePtr& keyframe,
                            const std::vector<std::int64_t>& feature_landmarks) {
+  ++revision_;
   if (keyframe == nullptr || hasKeyframe(keyframe->id)) return;
   const FeatureSet& features = keyframe->features;
   KeyframeEntry entry;
@@ -50,6 +51,7 @@ void LocalMap::addKeyframe(const KeyframePtr& keyframe,
 }
 
 void LocalMap::removeKeyframe(std::int64_t keyframe_id) {
+  ++revision_;
   const auto entry = keyframes_.find(keyframe_id);
   if (entry == keyframes_.end()) return;
   const std::vector<std::int64_t>& ids = entry->second.landmarks;
@@ -84,6 +86,7 @@ void LocalMap::removeKeyframe(std::int64_t keyframe_id) {
 }
 
 void LocalMap::clear() {
+  ++revision_;
   keyframes_.clear();
   landmarks_.clear();
 }

@@ -13,7 +13,7 @@
 namespace slamd {
 namespace {
 
-constexpr double kGridCellPx = 16.0;
+constexpr double kGridCellPx = 8.0;
 constexpr int kSiftMaxDistance = 350;    // L2 between SIFT descriptors (norm about 512)
 constexpr double kLostCovariance = 1e2;  // metres^2 / radians^2: "unknown"
 
@@ -125,19 +125,43 @@ struct VisualOdometry::CurrentFrame {
   cv::Mat depth_m;  ///< the frame's depth (CV_32F metres, NaN = none)
   Utime utime = 0;
   std::shared_ptr<const DenseFrame> pyramid;  ///< dense alignment's pyramid, when built
+  /// One feature as guided search first tests it: undistorted pixel, pyramid level, index.
+  struct GridEntry {
+    double x = 0.0;
+    double y = 0.0;
+    int octave = 0;
+    int index = 0;
+  };
   int grid_cols = 0;
   int grid_rows = 0;
-  std::vector<std::vector<int>> grid;
+  /// The features bucketed by cell (kGridCellPx squares, row-major) in one array: cell c holds
+  /// grid[grid_start[c]] up to grid[grid_start[c + 1]], so a run of cells along a row is one
+  /// contiguous range.
+  std::vector<int> grid_start;
+  std::vector<GridEntry> grid;
 
   void buildGrid() {
     grid_cols = std::max(1, static_cast<int>(std::ceil(K.width / kGridCellPx)));
     grid_rows = std::max(1, static_cast<int>(std::ceil(K.height / kGridCellPx)));
-    grid.assign(static_cast<std::size_t>(grid_cols * grid_rows), {});
+    const std::size_t cells = static_cast<std::size_t>(grid_cols * grid_rows);
+    std::vector<int> cell_of(features->size());
+    grid_start.assign(cells + 1, 0);
     for (std::size_t i = 0; i < features->size(); ++i) {
       const Eigen::Vector2d& p = features->pixels[i];
       const int cx = std::clamp(static_cast<int>(p.x() / kGridCellPx), 0, grid_cols - 1);
       const int cy = std::clamp(static_cast<int>(p.y() / kGridCellPx), 0, grid_rows - 1);
-      grid[static_cast<std::size_t>(cy * grid_cols + cx)].push_back(static_cast<int>(i));
+      cell_of[i] = cy * grid_cols + cx;
+      ++grid_start[static_cast<std::size_t>(cell_of[i]) + 1];
+    }
+    for (std::size_t c = 0; c < cells; ++c) grid_start[c + 1] += grid_start[c];
+    grid.resize(features->size());
+    std::vector<int> fill(grid_start.begin(), grid_start.end() - 1);
+    for (std::size_t i = 0; i < features->size(); ++i) {
+      GridEntry& e = grid[static_cast<std::size_t>(fill[static_cast<std::size_t>(cell_of[i])]++)];
+      e.x = features->pixels[i].x();
+      e.y = features->pixels[i].y();
+      e.octave = features->keypoints[i].octave;
+      e.index = static_cast<int>(i);
     }
   }
 };
@@ -251,10 +275,17 @@ void VisualOdometry::matchGuided(const FeatureSet& ref, const SE3& T_ref_curr_pr
                            : norm == DescriptorNorm::kL2    ? kSiftMaxDistance
                                                             : config_.fovis_max_sad;
   const double ratio = std::min(1.0, config_.match_ratio + 0.1);
+  // Scale consistency: binary descriptors within one pyramid level of each other, FOVIS patches on
+  // the same level, SIFT any.
+  const int max_octave_difference = norm == DescriptorNorm::kHamming ? 1
+                                    : norm == DescriptorNorm::kSad
+                                        ? 0
+                                        : std::numeric_limits<int>::max();
   const SE3 T_curr_ref = T_ref_curr_prior.inverse();
   const CameraIntrinsics& K = curr.K;
   // Best match per current feature: (distance, index into matches).
   std::vector<std::pair<int, int>> owner(cf.size(), {std::numeric_limits<int>::max(), -1});
+  std::vector<int> in_window;
   for (std::size_t i = 0; i < ref.size(); ++i) {
     if (!ref.hasDepth(i) || (ref_mask != nullptr && !(*ref_mask)[i])) continue;
     const Eigen::Vector3d q = T_curr_ref * ref.points[i];
@@ -272,25 +303,34 @@ void VisualOdometry::matchGuided(const FeatureSet& ref, const SE3& T_ref_curr_pr
     int second = std::numeric_limits<int>::max();
     int best_j = -1;
     const int ref_octave = ref.keypoints[i].octave;
+    const double r_squared = r * r;
     for (int cy = y0; cy <= y1; ++cy) {
-      for (int cx = x0; cx <= x1; ++cx) {
-        for (int j : curr.grid[static_cast<std::size_t>(cy * curr.grid_cols + cx)]) {
-          const std::size_t ju = static_cast<std::size_t>(j);
-          if ((cf.pixels[ju] - uv).squaredNorm() > r * r) continue;
-          if (norm == DescriptorNorm::kHamming &&
-              std::abs(cf.keypoints[ju].octave - ref_octave) > 1) {
-            continue;
-          }
-          if (norm == DescriptorNorm::kSad && cf.keypoints[ju].octave != ref_octave) continue;
-          const int d =
-              descriptorDistance(ref.descriptors, static_cast<int>(i), cf.descriptors, j, norm);
-          if (d < best) {
-            second = best;
-            best = d;
-            best_j = j;
-          } else if (d < second) {
-            second = d;
-          }
+      const std::size_t row = static_cast<std::size_t>(cy * curr.grid_cols);
+      const int first = curr.grid_start[row + static_cast<std::size_t>(x0)];
+      const int last = curr.grid_start[row + static_cast<std::size_t>(x1) + 1];
+      // The window test without branches (whether a feature lies inside is a coin toss for the
+      // branch predictor), then descriptors for those inside.
+      in_window.resize(std::max(in_window.size(), static_cast<std::size_t>(last - first)));
+      std::size_t count = 0;
+      for (int e = first; e < last; ++e) {
+        const CurrentFrame::GridEntry& entry = curr.grid[static_cast<std::size_t>(e)];
+        const double du = entry.x - uv.x(), dv = entry.y - uv.y();
+        in_window[count] = entry.index;
+        count += static_cast<std::size_t>(
+            (du * du + dv * dv <= r_squared) &
+            (std::abs(entry.octave - ref_octave) <= max_octave_difference));
+      }
+      for (std::size_t k = 0; k < count; ++k) {
+        const int j = in_window[k];
+        const int d =
+            descriptorDistance(ref.descriptors, static_cast<int>(i), cf.descriptors, j, norm);
+        // Equal distances go to the lower index, whatever order the cells are visited in.
+        if (d < best || (d == best && j < best_j)) {
+          second = best;
+          best = d;
+          best_j = j;
+        } else if (d < second) {
+          second = d;
         }
       }
     }
@@ -1026,16 +1066,16 @@ void VisualOdometry::associateWithKeyframe(const TrackAttempt& attempt, const Ke
   }
 }
 
-void VisualOdometry::trackLocalMap(const CurrentFrame& curr, const SE3& T_world_ref,
-                                   bool keyframe_is_reference, TrackAttempt& attempt,
-                                   SE3& T_world_curr, OdometryResult& res) {
-  if (!local_map_.hasKeyframe(keyframe_->id)) return;
-  const std::int64_t t0 = steadyNowNs();
-  const FeatureSet& cf = *curr.features;
+void VisualOdometry::collectLocalMapGroups(bool keyframe_is_reference) {
   // The landmarks to search: those of the keyframes covisible with the keyframe, and of the
   // keyframe itself unless the attempt already measured against it. Each is searched through its
   // representative view (the latest keyframe that observed it): that keyframe's descriptor,
   // scale, orientation and patch.
+  local_search_ = LocalMapSearch();
+  local_search_.valid = true;
+  local_search_.keyframe_id = keyframe_->id;
+  local_search_.keyframe_is_reference = keyframe_is_reference;
+  local_search_.map_revision = local_map_.revision();
   std::vector<std::int64_t> sources = local_map_.covisibleKeyframes(
       keyframe_->id, config_.local_map_min_shared, config_.local_map_keyframes);
   if (!keyframe_is_reference) sources.push_back(keyframe_->id);
@@ -1045,19 +1085,13 @@ void VisualOdometry::trackLocalMap(const CurrentFrame& curr, const SE3& T_world_
     for (std::int64_t id : local_map_.landmarksOf(keyframe_->id)) seen.insert(id);
   }
   const std::size_t num_excluded = seen.size();
-  struct Group {
-    const Keyframe* kf = nullptr;
-    std::vector<std::uint8_t> mask;
-    std::vector<std::int64_t> landmark_of_feature;
-  };
-  std::unordered_map<std::int64_t, Group> groups;
   for (std::int64_t source : sources) {
     for (std::int64_t id : local_map_.landmarksOf(source)) {
       if (id < 0 || !seen.insert(id).second) continue;
       const MapLandmark* landmark = local_map_.landmark(id);
       if (landmark == nullptr) continue;
       const MapLandmark::Observation& view = landmark->representative();
-      Group& group = groups[view.keyframe_id];
+      LocalMapGroup& group = local_search_.groups[view.keyframe_id];
       if (group.kf == nullptr) {
         group.kf = &local_map_.keyframe(view.keyframe_id);
         group.mask.assign(group.kf->features.size(), 0);
@@ -1068,7 +1102,22 @@ void VisualOdometry::trackLocalMap(const CurrentFrame& curr, const SE3& T_world_
       group.landmark_of_feature[f] = id;
     }
   }
-  res.stats.local_map_landmarks = static_cast<int>(seen.size() - num_excluded);
+  local_search_.num_landmarks = static_cast<int>(seen.size() - num_excluded);
+}
+
+void VisualOdometry::trackLocalMap(const CurrentFrame& curr, const SE3& T_world_ref,
+                                   bool keyframe_is_reference, TrackAttempt& attempt,
+                                   SE3& T_world_curr, OdometryResult& res) {
+  if (!local_map_.hasKeyframe(keyframe_->id)) return;
+  const std::int64_t t0 = steadyNowNs();
+  const FeatureSet& cf = *curr.features;
+  if (!local_search_.valid || local_search_.keyframe_id != keyframe_->id ||
+      local_search_.keyframe_is_reference != keyframe_is_reference ||
+      local_search_.map_revision != local_map_.revision()) {
+    collectLocalMapGroups(keyframe_is_reference);
+  }
+  res.stats.local_map_landmarks = local_search_.num_landmarks;
+  const std::unordered_map<std::int64_t, LocalMapGroup>& groups = local_search_.groups;
   if (groups.empty()) return;
 
   // Search by projection around the current estimate: ratio test within the window and scale
@@ -1076,7 +1125,7 @@ void VisualOdometry::trackLocalMap(const CurrentFrame& curr, const SE3& T_world_
   struct Candidate {
     Correspondence match;
     std::int64_t landmark_id = -1;
-    const Group* group = nullptr;
+    const LocalMapGroup* group = nullptr;
   };
   std::vector<Candidate> candidates;
   std::vector<std::uint8_t> curr_taken(cf.size(), 0);

@@ -69,6 +69,9 @@ class LocalMap {
                                                int max_keyframes) const;
   std::size_t numLandmarks() const { return landmarks_.size(); }
   std::size_t numKeyframes() const { return keyframes_.size(); }
+  /// Changes whenever a keyframe is added or removed or the map cleared: what is derived from the
+  /// map's keyframes and landmark observations is still valid while it stays the same.
+  std::uint64_t revision() const { return revision_; }
 
  private:
   struct KeyframeEntry {
@@ -83,6 +86,7 @@ class LocalMap {
   std::unordered_map<std::int64_t, KeyframeEntry> keyframes_;
   std::unordered_map<std::int64_t, MapLandmark> landmarks_;
   std::int64_t next_landmark_id_ = 0;
+  std::uint64_t revision_ = 0;
 };
 
 }  // namespace slamd

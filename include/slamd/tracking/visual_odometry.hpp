@@ -31,6 +31,7 @@
 #include <optional>
 #include <random>
 #include <string>
+#include <unordered_map>
 #include <vector>
 
 #include "slamd/common/pose_estimate.hpp"
@@ -182,6 +183,8 @@ class VisualOdometry {
   /// (keyframe_, T_world_curr and res's reference fields set) when one matched well enough at a
   /// pose the camera can have reached since the last measured frame.
   bool relocalizeAfterLoss(const CurrentFrame& curr, SE3& T_world_curr, OdometryResult& res);
+  /// Fills local_search_ for the current keyframe.
+  void collectLocalMapGroups(bool keyframe_is_reference);
   /// The landmarks of the keyframes covisible with the keyframe, searched by projection at
   /// T_world_curr and refined jointly with the attempt (measured against T_world_ref; the
   /// keyframe's own landmarks are left out when it is the reference). Updates attempt.T_ref_curr,
@@ -253,6 +256,26 @@ class VisualOdometry {
   /// The landmark each feature of the current frame was matched to (-1: none); the associations
   /// a keyframe made of the frame takes into the local map.
   std::vector<std::int64_t> curr_landmarks_;
+  /// The local map's landmarks trackLocalMap searches, grouped by the keyframe whose view
+  /// represents them (its descriptor, scale and patch): which features of that keyframe to search
+  /// and the landmark of each.
+  struct LocalMapGroup {
+    const Keyframe* kf = nullptr;
+    std::vector<std::uint8_t> mask;
+    std::vector<std::int64_t> landmark_of_feature;
+  };
+  /// The groups depend only on the keyframe, whether the frame was measured against it, and the
+  /// local map's keyframes and observations; they are rebuilt when one of those changes (about
+  /// once per keyframe), not every frame.
+  struct LocalMapSearch {
+    bool valid = false;
+    std::int64_t keyframe_id = -1;
+    bool keyframe_is_reference = false;
+    std::uint64_t map_revision = 0;
+    int num_landmarks = 0;
+    std::unordered_map<std::int64_t, LocalMapGroup> groups;
+  };
+  LocalMapSearch local_search_;
   std::int64_t next_keyframe_id_ = 0;
   std::int64_t segment_ = 0;
 
