@@ -233,17 +233,37 @@ std::vector<int> maximumConsistentClique(const std::vector<Correspondence>& matc
 
 namespace {
 
-/// refinementResidual() with the inverse transform T_curr_ref = T_ref_curr^-1 precomputed.
-int residualFromInverse(const Correspondence& c, const CameraIntrinsics& K, const SE3& T_curr_ref,
-                        double depth_sigma_coeff, Eigen::Vector3d& residual,
-                        Eigen::Matrix<double, 3, 6>& jacobian) {
+/// The factors that whiten a correspondence's residuals: 1 / pixel sigma, and 1 / the depth
+/// difference's sigma (0 when the current depth is not measured or depth is not used). They do
+/// not depend on the pose, so refinement computes them once.
+struct Whitening {
+  double inv_sigma_px = 1.0;
+  double inv_sigma_depth = 0.0;
+};
+
+Whitening whiteningOf(const Correspondence& c, double depth_sigma_coeff) {
+  Whitening w;
+  w.inv_sigma_px = 1.0 / c.pixel_sigma_px;
+  if (depth_sigma_coeff > 0.0 && c.hasCurrDepth()) {
+    const double s_curr = depthSigma(c.depth_curr_m, depth_sigma_coeff);
+    const double s_ref = depthSigma(c.point_ref.z(), depth_sigma_coeff);
+    w.inv_sigma_depth = 1.0 / std::sqrt(s_curr * s_curr + s_ref * s_ref);
+  }
+  return w;
+}
+
+/// refinementResidual() with the inverse transform T_curr_ref = T_ref_curr^-1 and the whitening
+/// precomputed.
+int whitenedResidual(const Correspondence& c, const CameraIntrinsics& K, const SE3& T_curr_ref,
+                     const Whitening& whitening, Eigen::Vector3d& residual,
+                     Eigen::Matrix<double, 3, 6>& jacobian) {
   // q = T^-1 * P; with T' = T * exp(xi): q' = exp(-xi) * q ~ q - rho + [q]x phi.
   const Eigen::Vector3d q = T_curr_ref * c.point_ref;
   if (q.z() <= 1e-6) return 0;
   const double inv_z = 1.0 / q.z();
   const double x = q.x() * inv_z;
   const double y = q.y() * inv_z;
-  const double inv_sigma = 1.0 / c.pixel_sigma_px;
+  const double inv_sigma = whitening.inv_sigma_px;
   residual(0) = (K.fx * x + K.cx - c.pixel_curr.x()) * inv_sigma;
   residual(1) = (K.fy * y + K.cy - c.pixel_curr.y()) * inv_sigma;
   Eigen::Matrix<double, 3, 6> dq_dxi;
@@ -252,17 +272,33 @@ int residualFromInverse(const Correspondence& c, const CameraIntrinsics& K, cons
   Eigen::Matrix<double, 2, 3> dpi_dq;
   dpi_dq << K.fx * inv_z, 0.0, -K.fx * x * inv_z, 0.0, K.fy * inv_z, -K.fy * y * inv_z;
   jacobian.topRows<2>() = inv_sigma * dpi_dq * dq_dxi;
-  if (depth_sigma_coeff > 0.0 && c.hasCurrDepth()) {
-    const double s_curr = depthSigma(c.depth_curr_m, depth_sigma_coeff);
-    const double s_ref = depthSigma(c.point_ref.z(), depth_sigma_coeff);
-    const double inv_sz = 1.0 / std::sqrt(s_curr * s_curr + s_ref * s_ref);
-    residual(2) = (q.z() - c.depth_curr_m) * inv_sz;
-    jacobian.row(2) = inv_sz * dq_dxi.row(2);
+  if (whitening.inv_sigma_depth > 0.0) {
+    residual(2) = (q.z() - c.depth_curr_m) * whitening.inv_sigma_depth;
+    jacobian.row(2) = whitening.inv_sigma_depth * dq_dxi.row(2);
     return 3;
   }
   residual(2) = 0.0;
   jacobian.row(2).setZero();
   return 2;
+}
+
+/// whitenedResidual() with the whitening computed here.
+int residualFromInverse(const Correspondence& c, const CameraIntrinsics& K, const SE3& T_curr_ref,
+                        double depth_sigma_coeff, Eigen::Vector3d& residual,
+                        Eigen::Matrix<double, 3, 6>& jacobian) {
+  return whitenedResidual(c, K, T_curr_ref, whiteningOf(c, depth_sigma_coeff), residual, jacobian);
+}
+
+/// H += w * J^T J for the rows of J, on H's upper triangle only (the lower is filled once the
+/// sum is complete).
+template <int kRows>
+void addToUpperNormal(const Eigen::Matrix<double, kRows, 6>& J, double w, Matrix6d& H) {
+  const Eigen::Matrix<double, kRows, 6> weighted = w * J;
+  for (int col = 0; col < 6; ++col) {
+    for (int row = 0; row <= col; ++row) {
+      H(row, col) += weighted.col(row).dot(J.col(col));
+    }
+  }
 }
 
 /// Robust noise scales of the whitened reprojection and depth residuals at T_ref_curr: the
@@ -319,6 +355,10 @@ RefinementResult refinePose(const std::vector<Correspondence>& matches,
   }
   const double inv_scale_px = 1.0 / scale_px;
   const double inv_scale_depth = 1.0 / scale_depth;
+  std::vector<Whitening> whitening(matches.size());
+  for (std::size_t i = 0; i < matches.size(); ++i) {
+    if (use[i]) whitening[i] = whiteningOf(matches[i], options.depth_sigma_coeff);
+  }
 
   struct Eval {
     double cost = 0.0;
@@ -337,7 +377,7 @@ RefinementResult refinePose(const std::vector<Correspondence>& matches,
     for (std::size_t i = 0; i < matches.size(); ++i) {
       if (!use[i]) continue;
       const Correspondence& c = matches[i];
-      const int rows = residualFromInverse(c, K, T_inv, options.depth_sigma_coeff, r, J);
+      const int rows = whitenedResidual(c, K, T_inv, whitening[i], r, J);
       if (rows == 0) {
         e.cost += 2.0 * k * 100.0;  // behind the camera: a large constant penalty
         continue;
@@ -363,13 +403,16 @@ RefinementResult refinePose(const std::vector<Correspondence>& matches,
         e.rows += 1;
       }
       if (with_system) {
-        e.H.noalias() += w_reproj * J.topRows<2>().transpose() * J.topRows<2>();
+        addToUpperNormal<2>(J.topRows<2>(), w_reproj, e.H);
         e.g.noalias() += w_reproj * J.topRows<2>().transpose() * r.head<2>();
         if (rows == 3) {
-          e.H.noalias() += w_depth * J.row(2).transpose() * J.row(2);
+          addToUpperNormal<1>(J.row(2), w_depth, e.H);
           e.g.noalias() += w_depth * J.row(2).transpose() * r(2);
         }
       }
+    }
+    for (int col = 0; col < 6; ++col) {
+      for (int row = col + 1; row < 6; ++row) e.H(row, col) = e.H(col, row);
     }
     return e;
   };
