@@ -16,51 +16,35 @@ namespace {
 constexpr int kPatchSize = 9;  // FOVIS patch descriptor: 9x9 pixels
 constexpr int kPatchHalf = kPatchSize / 2;
 
-/// The kSide x kSide bilinear samples of a CV_8UC1 image around (x, y), row by row: sample (i, j)
-/// at (x - kSide / 2 + i, y - kSide / 2 + j). All of them lie at integer offsets from (x, y), so
-/// one set of weights serves them all. The caller keeps the samples inside the image.
-template <int kSide>
-void sampleSquare(const cv::Mat& image, double x, double y, double (&out)[kSide * kSide]) {
-  const double fx = std::floor(x), fy = std::floor(y);
-  const double ax = x - fx, ay = y - fy;
-  const int x0 = static_cast<int>(fx) - kSide / 2, y0 = static_cast<int>(fy) - kSide / 2;
-  for (int row = 0; row < kSide; ++row) {
-    const std::uint8_t* r0 = image.ptr<std::uint8_t>(y0 + row) + x0;
-    const std::uint8_t* r1 = image.ptr<std::uint8_t>(y0 + row + 1) + x0;
-    double* samples = out + row * kSide;
-    for (int col = 0; col < kSide; ++col) {
-      samples[col] = (1 - ay) * ((1 - ax) * r0[col] + ax * r0[col + 1]) +
-                     ay * ((1 - ax) * r1[col] + ax * r1[col + 1]);
-    }
-  }
-}
-
 /// alignPatch's 9x9 patch, padded with zeros to a whole number of 4- and 8-float SIMD packets.
 constexpr int kAlignSide = 9;
 constexpr int kPatchPadded = 88;
 
-/// The 9x9 bilinear samples of a CV_8UC1 image around (x, y) in single precision, row by row,
-/// into the first 81 entries of out (as sampleSquare; the caller keeps them inside the image).
-void samplePatch(const cv::Mat& image, double x, double y, float* out) {
+/// The kSide x kSide bilinear samples of a CV_8UC1 image around (x, y), row by row: sample
+/// (i, j) at (x - kSide / 2 + i, y - kSide / 2 + j), into out[j * kSide + i]. All of them lie at
+/// integer offsets from (x, y), so one set of weights serves them all. The caller keeps the
+/// samples inside the image.
+template <int kSide>
+void sampleSquare(const cv::Mat& image, double x, double y, float* out) {
   const double fx = std::floor(x), fy = std::floor(y);
   const float ax = static_cast<float>(x - fx), ay = static_cast<float>(y - fy);
-  const int x0 = static_cast<int>(fx) - kAlignSide / 2, y0 = static_cast<int>(fy) - kAlignSide / 2;
+  const int x0 = static_cast<int>(fx) - kSide / 2, y0 = static_cast<int>(fy) - kSide / 2;
   // Rows interpolated vertically, then horizontally (loops over plain float arrays, which the
   // compiler turns into SIMD).
-  float upper[kAlignSide + 1], lower[kAlignSide + 1], vertical[kAlignSide + 1];
+  float upper[kSide + 1], lower[kSide + 1], vertical[kSide + 1];
   const std::uint8_t* r0 = image.ptr<std::uint8_t>(y0) + x0;
-  for (int col = 0; col <= kAlignSide; ++col) lower[col] = r0[col];
-  for (int row = 0; row < kAlignSide; ++row) {
+  for (int col = 0; col <= kSide; ++col) lower[col] = r0[col];
+  for (int row = 0; row < kSide; ++row) {
     const std::uint8_t* r1 = image.ptr<std::uint8_t>(y0 + row + 1) + x0;
-    for (int col = 0; col <= kAlignSide; ++col) {
+    for (int col = 0; col <= kSide; ++col) {
       upper[col] = lower[col];
       lower[col] = r1[col];
     }
-    for (int col = 0; col <= kAlignSide; ++col) {
+    for (int col = 0; col <= kSide; ++col) {
       vertical[col] = upper[col] + ay * (lower[col] - upper[col]);
     }
-    float* samples = out + row * kAlignSide;
-    for (int col = 0; col < kAlignSide; ++col) {
+    float* samples = out + row * kSide;
+    for (int col = 0; col < kSide; ++col) {
       samples[col] = vertical[col] + ax * (vertical[col + 1] - vertical[col]);
     }
   }
@@ -296,7 +280,7 @@ bool refineCorner(const cv::Mat& gray, const cv::Point2f& initial, cv::Point2f& 
     const int x0 = static_cast<int>(std::floor(px)) - kHalf - 1;
     const int y0 = static_cast<int>(std::floor(py)) - kHalf - 1;
     if (x0 < 0 || y0 < 0 || x0 + kSide >= gray.cols || y0 + kSide >= gray.rows) return false;
-    double samples[kSide * kSide];
+    float samples[kSide * kSide];
     sampleSquare<kSide>(gray, px, py, samples);
     // Normal equations in the offset d from (px, py): sum w g g^T d = sum w g g^T x.
     double a00 = 0, a01 = 0, a11 = 0, b0 = 0, b1 = 0;
@@ -304,8 +288,10 @@ bool refineCorner(const cv::Mat& gray, const cv::Point2f& initial, cv::Point2f& 
     for (int dy = -kHalf; dy <= kHalf; ++dy) {
       for (int dx = -kHalf; dx <= kHalf; ++dx, ++k) {
         const int sx = dx + kHalf + 1, sy = dy + kHalf + 1;
-        const double gx = 0.5 * (samples[sy * kSide + sx + 1] - samples[sy * kSide + sx - 1]);
-        const double gy = 0.5 * (samples[(sy + 1) * kSide + sx] - samples[(sy - 1) * kSide + sx]);
+        const double gx =
+            0.5 * static_cast<double>(samples[sy * kSide + sx + 1] - samples[sy * kSide + sx - 1]);
+        const double gy = 0.5 * static_cast<double>(samples[(sy + 1) * kSide + sx] -
+                                                    samples[(sy - 1) * kSide + sx]);
         const double w = weights[k];
         const double gxx = w * gx * gx, gxy = w * gx * gy, gyy = w * gy * gy;
         a00 += gxx;
@@ -441,28 +427,18 @@ bool alignPatch(const cv::Mat& templ, const cv::Point2f& templ_px, const cv::Mat
   // zeros to whole SIMD packets.
   using PatchVector = Eigen::Matrix<float, kPatchPadded, 1>;
   PatchVector gx = PatchVector::Zero(), gy = PatchVector::Zero(), tc = PatchVector::Zero();
-  double t_mean = 0.0, gx_mean = 0.0, gy_mean = 0.0;
-  for (int y = 0; y < kSide; ++y) {
-    for (int x = 0; x < kSide; ++x) {
-      const double grad_x = 0.5 * (t[y + 1][x + 2] - t[y + 1][x]);
-      const double grad_y = 0.5 * (t[y + 2][x + 1] - t[y][x + 1]);
-      t_mean += t[y + 1][x + 1];
-      gx_mean += grad_x;
-      gy_mean += grad_y;
-    }
-  }
-  constexpr int kCount = kSide * kSide;
-  t_mean /= kCount;
-  gx_mean /= kCount;
-  gy_mean /= kCount;
   for (int y = 0; y < kSide; ++y) {
     for (int x = 0; x < kSide; ++x) {
       const int k = y * kSide + x;
-      gx[k] = static_cast<float>(0.5 * (t[y + 1][x + 2] - t[y + 1][x]) - gx_mean);
-      gy[k] = static_cast<float>(0.5 * (t[y + 2][x + 1] - t[y][x + 1]) - gy_mean);
-      tc[k] = static_cast<float>(t[y + 1][x + 1] - t_mean);
+      gx[k] = 0.5f * (t[y + 1][x + 2] - t[y + 1][x]);
+      gy[k] = 0.5f * (t[y + 2][x + 1] - t[y][x + 1]);
+      tc[k] = t[y + 1][x + 1];
     }
   }
+  constexpr int kCount = kSide * kSide;
+  gx.head<kCount>().array() -= gx.sum() / kCount;
+  gy.head<kCount>().array() -= gy.sum() / kCount;
+  tc.head<kCount>().array() -= tc.sum() / kCount;
   const double h00 = gx.squaredNorm(), h01 = gx.dot(gy), h11 = gy.squaredNorm();
   const double det = h00 * h11 - h01 * h01;
   if (det < 1e-6 * (h00 + h11) * (h00 + h11) || h00 + h11 < 1.0) return false;
@@ -473,7 +449,7 @@ bool alignPatch(const cv::Mat& templ, const cv::Point2f& templ_px, const cv::Mat
   PatchVector iv = PatchVector::Zero();
   for (int it = 0; it < 10; ++it) {
     if (!inside(image, px, py)) return false;
-    samplePatch(image, px, py, iv.data());
+    sampleSquare<kAlignSide>(image, px, py, iv.data());
     const PatchVector difference = iv - tc;
     const double b0 = gx.dot(difference), b1 = gy.dot(difference);
     const double dx = (h11 * b0 - h01 * b1) / det;
