@@ -262,7 +262,7 @@ OdometryResult VisualOdometry::guardedProcess(const RgbdFrame& frame,
 void VisualOdometry::matchGuided(const FeatureSet& ref, const SE3& T_ref_curr_prior,
                                  const CurrentFrame& curr, double radius_px,
                                  std::vector<Correspondence>& matches,
-                                 const std::vector<std::uint8_t>* ref_mask) const {
+                                 const std::vector<int>* ref_subset) const {
   matches.clear();
   const FeatureSet& cf = *curr.features;
   if (ref.descriptors.empty() || cf.descriptors.empty() ||
@@ -286,8 +286,10 @@ void VisualOdometry::matchGuided(const FeatureSet& ref, const SE3& T_ref_curr_pr
   // Best match per current feature: (distance, index into matches).
   std::vector<std::pair<int, int>> owner(cf.size(), {std::numeric_limits<int>::max(), -1});
   std::vector<int> in_window;
-  for (std::size_t i = 0; i < ref.size(); ++i) {
-    if (!ref.hasDepth(i) || (ref_mask != nullptr && !(*ref_mask)[i])) continue;
+  const std::size_t num_searched = ref_subset != nullptr ? ref_subset->size() : ref.size();
+  for (std::size_t n = 0; n < num_searched; ++n) {
+    const std::size_t i = ref_subset != nullptr ? static_cast<std::size_t>((*ref_subset)[n]) : n;
+    if (!ref.hasDepth(i)) continue;
     const Eigen::Vector3d q = T_curr_ref * ref.points[i];
     if (q.z() <= 0.05) continue;
     const Eigen::Vector2d uv = K.project(q);
@@ -1094,12 +1096,14 @@ void VisualOdometry::collectLocalMapGroups(bool keyframe_is_reference) {
       LocalMapGroup& group = local_search_.groups[view.keyframe_id];
       if (group.kf == nullptr) {
         group.kf = &local_map_.keyframe(view.keyframe_id);
-        group.mask.assign(group.kf->features.size(), 0);
         group.landmark_of_feature.assign(group.kf->features.size(), -1);
       }
-      const std::size_t f = static_cast<std::size_t>(view.feature_index);
-      group.mask[f] = 1;
-      group.landmark_of_feature[f] = id;
+      group.landmark_of_feature[static_cast<std::size_t>(view.feature_index)] = id;
+    }
+  }
+  for (auto& [kf_id, group] : local_search_.groups) {
+    for (std::size_t f = 0; f < group.landmark_of_feature.size(); ++f) {
+      if (group.landmark_of_feature[f] >= 0) group.features.push_back(static_cast<int>(f));
     }
   }
   local_search_.num_landmarks = static_cast<int>(seen.size() - num_excluded);
@@ -1139,7 +1143,7 @@ void VisualOdometry::trackLocalMap(const CurrentFrame& curr, const SE3& T_world_
     const SE3 T_kf_world = T_world_kf.inverse();
     std::vector<Correspondence> matches;
     matchGuided(group.kf->features, T_kf_world * T_world_curr, curr,
-                config_.refine_search_radius_px, matches, &group.mask);
+                config_.refine_search_radius_px, matches, &group.features);
     for (Correspondence& c : matches) {
       const std::int64_t id = group.landmark_of_feature[static_cast<std::size_t>(c.ref_index)];
       c.point_ref = T_kf_world * local_map_.landmark(id)->p_world;

@@ -214,10 +214,10 @@ class VisualOdometry {
   /// Every exit: the frame becomes the previous frame of the next call.
   OdometryResult commit(OdometryResult res, std::shared_ptr<const FeatureSet> features,
                         bool tracked, std::int64_t t_start);
-  /// ref_mask: when given, only the reference features it marks are matched.
+  /// ref_subset: when given, only these reference features (indices, ascending) are matched.
   void matchGuided(const FeatureSet& ref, const SE3& T_ref_curr_prior, const CurrentFrame& curr,
                    double radius_px, std::vector<Correspondence>& matches,
-                   const std::vector<std::uint8_t>* ref_mask = nullptr) const;
+                   const std::vector<int>* ref_subset = nullptr) const;
   /// How track() searches: around the prior, falling back to whole-image descriptor matching
   /// when too few are found; or only around the prior, in a window wider by a factor.
   struct Search {
@@ -261,7 +261,7 @@ class VisualOdometry {
   /// and the landmark of each.
   struct LocalMapGroup {
     const Keyframe* kf = nullptr;
-    std::vector<std::uint8_t> mask;
+    std::vector<int> features;  ///< ascending
     std::vector<std::int64_t> landmark_of_feature;
   };
   /// The groups depend only on the keyframe, whether the frame was measured against it, and the
