@@ -19,6 +19,8 @@ constexpr int kPatchHalf = kPatchSize / 2;
 /// alignPatch's 9x9 patch, padded with zeros to a whole number of 4- and 8-float SIMD packets.
 constexpr int kAlignSide = 9;
 constexpr int kPatchPadded = 88;
+static_assert(kPatchPadded >= kAlignSide * kAlignSide && kPatchPadded % 8 == 0,
+              "the padded patch holds the patch in whole 8-float packets");
 
 /// The kSide x kSide bilinear samples of a CV_8UC1 image around (x, y), row by row: sample
 /// (i, j) at (x - kSide / 2 + i, y - kSide / 2 + j), into out[j * kSide + i]. All of them lie at

@@ -19,8 +19,8 @@ void LocalMap::observationOf(const Keyframe& keyframe, int feature_index, Eigen:
 
 void LocalMap::addKeyframe(const KeyframePtr& keyframe,
                            const std::vector<std::int64_t>& feature_landmarks) {
-  ++revision_;
   if (keyframe == nullptr || hasKeyframe(keyframe->id)) return;
+  ++revision_;
   const FeatureSet& features = keyframe->features;
   KeyframeEntry entry;
   entry.keyframe = keyframe;
@@ -51,9 +51,9 @@ void LocalMap::addKeyframe(const KeyframePtr& keyframe,
 }
 
 void LocalMap::removeKeyframe(std::int64_t keyframe_id) {
-  ++revision_;
   const auto entry = keyframes_.find(keyframe_id);
   if (entry == keyframes_.end()) return;
+  ++revision_;
   const std::vector<std::int64_t>& ids = entry->second.landmarks;
   for (std::size_t i = 0; i < ids.size(); ++i) {
     if (ids[i] < 0) continue;

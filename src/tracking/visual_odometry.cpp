@@ -1074,7 +1074,6 @@ void VisualOdometry::collectLocalMapGroups(bool keyframe_is_reference) {
   // representative view (the latest keyframe that observed it): that keyframe's descriptor,
   // scale, orientation and patch.
   local_search_ = LocalMapSearch();
-  local_search_.valid = true;
   local_search_.keyframe_id = keyframe_->id;
   local_search_.keyframe_is_reference = keyframe_is_reference;
   local_search_.map_revision = local_map_.revision();
@@ -1115,7 +1114,7 @@ void VisualOdometry::trackLocalMap(const CurrentFrame& curr, const SE3& T_world_
   if (!local_map_.hasKeyframe(keyframe_->id)) return;
   const std::int64_t t0 = steadyNowNs();
   const FeatureSet& cf = *curr.features;
-  if (!local_search_.valid || local_search_.keyframe_id != keyframe_->id ||
+  if (local_search_.keyframe_id != keyframe_->id ||
       local_search_.keyframe_is_reference != keyframe_is_reference ||
       local_search_.map_revision != local_map_.revision()) {
     collectLocalMapGroups(keyframe_is_reference);

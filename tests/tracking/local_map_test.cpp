@@ -60,6 +60,31 @@ TEST(LocalMap, MatchedFeaturesJoinTheirLandmarkAndTheRestStartNewOnes) {
   EXPECT_NEAR((shared->p_world - Eigen::Vector3d(0, 0, 1)).norm(), 0.0, 1e-12);
 }
 
+TEST(LocalMap, TheRevisionChangesExactlyWhenKeyframesOrObservationsDo) {
+  LocalMap map(kDepthSigmaCoeff);
+  std::uint64_t revision = map.revision();
+  auto changed = [&] {
+    const bool different = map.revision() != revision;
+    revision = map.revision();
+    return different;
+  };
+  const KeyframePtr first = keyframeWith(0, SE3::Identity(), {{0, 0, 1}, {0, 1, 2}});
+  map.addKeyframe(first, {});
+  EXPECT_TRUE(changed());
+  map.addKeyframe(first, {});  // already in the map: ignored
+  EXPECT_FALSE(changed());
+  map.addKeyframe(nullptr, {});
+  EXPECT_FALSE(changed());
+  map.addKeyframe(keyframeWith(1, translated(0.1), {{-0.1, 0, 1}}), {map.landmarksOf(0)[0]});
+  EXPECT_TRUE(changed());  // a new observation of landmark 0: its representative view moved
+  map.removeKeyframe(7);   // not in the map
+  EXPECT_FALSE(changed());
+  map.removeKeyframe(1);
+  EXPECT_TRUE(changed());
+  map.clear();
+  EXPECT_TRUE(changed());
+}
+
 TEST(LocalMap, ThePositionIsTheInverseVarianceMeanAndFollowsRemovals) {
   LocalMap map(kDepthSigmaCoeff);
   // One landmark seen at 1 m and at 2 m depth, 1 cm apart (odometry error): sigma_z grows with

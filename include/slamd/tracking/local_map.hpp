@@ -69,8 +69,9 @@ class LocalMap {
                                                int max_keyframes) const;
   std::size_t numLandmarks() const { return landmarks_.size(); }
   std::size_t numKeyframes() const { return keyframes_.size(); }
-  /// Changes whenever a keyframe is added or removed or the map cleared: what is derived from the
-  /// map's keyframes and landmark observations is still valid while it stays the same.
+  /// Changes whenever a keyframe is added or removed or the map cleared (not when an add or a
+  /// removal is ignored): what is derived from the map's keyframes and landmark observations is
+  /// still valid while it stays the same.
   std::uint64_t revision() const { return revision_; }
 
  private:

@@ -268,8 +268,7 @@ class VisualOdometry {
   /// local map's keyframes and observations; they are rebuilt when one of those changes (about
   /// once per keyframe), not every frame.
   struct LocalMapSearch {
-    bool valid = false;
-    std::int64_t keyframe_id = -1;
+    std::int64_t keyframe_id = -1;  ///< -1: none collected yet
     bool keyframe_is_reference = false;
     std::uint64_t map_revision = 0;
     int num_landmarks = 0;
