@@ -596,16 +596,27 @@ FrameRead OpenNi2Source::frameFromPendingPair() {
     cv::cvtColor(color, out->color_bgr, channels == 3 ? cv::COLOR_RGB2BGR : cv::COLOR_GRAY2BGR);
     ensureGray(*out);
   }
-  const auto device_us = static_cast<std::uint64_t>(depth_frame.getTimestamp());
-  if (kind_ == Kind::kFile) {
-    out->utime = static_cast<Utime>(device_us);
-  } else {
-    if (!s.clock_anchored || device_us < s.first_device_us) {
-      s.clock_anchored = true;
-      s.first_device_us = device_us;
-      s.first_wall_utime = wallClockUtime();
+  const auto depth_device_us = static_cast<std::uint64_t>(depth_frame.getTimestamp());
+  if (kind_ != Kind::kFile && (!s.clock_anchored || depth_device_us < s.first_device_us)) {
+    s.clock_anchored = true;
+    s.first_device_us = depth_device_us;
+    s.first_wall_utime = wallClockUtime();
+  }
+  // Recordings keep the device clock; a live device is anchored to the host's wall clock.
+  auto toUtime = [&](std::uint64_t device_us) {
+    if (kind_ == Kind::kFile) return static_cast<Utime>(device_us);
+    return s.first_wall_utime + static_cast<Utime>(device_us) -
+           static_cast<Utime>(s.first_device_us);
+  };
+  out->utime = toUtime(depth_device_us);
+  // Streams without hardware sync (a Kinect v1) stamp colour and depth apart: utime is the
+  // colour image's, and tracking moves the depths to it.
+  if (s.has_color && !s.pair_by_arrival) {
+    const auto color_device_us = static_cast<std::uint64_t>(color_frame.getTimestamp());
+    if (color_device_us != depth_device_us) {
+      out->depth_utime = out->utime;
+      out->utime = toUtime(color_device_us);
     }
-    out->utime = s.first_wall_utime + static_cast<Utime>(device_us - s.first_device_us);
   }
   out->sequence = depth_frame.getFrameIndex();
   out->intrinsics = s.device_intrinsics;

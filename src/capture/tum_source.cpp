@@ -176,6 +176,7 @@ FrameRead TumSource::readPair(const TumFramePair& pair) {
                          std::to_string(frame->color_bgr.rows));
   }
   frame->utime = secondsToUtime(pair.rgb_timestamp_s);
+  frame->depth_utime = secondsToUtime(pair.depth_timestamp_s);
   frame->sequence = sequence_++;
   frame->intrinsics = config_.camera.intrinsics;
   frame->depth_m = depthRawToMeters(raw, config_.camera.depth_scale);

@@ -390,7 +390,7 @@ kinect::frame_msg_t encodeKinectFrame(const RgbdFrame& frame, bool jpeg_color, b
   }
   msg.image.image_data_nbytes = static_cast<int32_t>(msg.image.image_data.size());
 
-  msg.depth.timestamp = frame.utime;
+  msg.depth.timestamp = frame.depthUtime();
   msg.depth.width = static_cast<int16_t>(width);
   msg.depth.height = static_cast<int16_t>(height);
   msg.depth.depth_data_format = kinect::depth_msg_t::DEPTH_MM;
@@ -420,6 +420,10 @@ RgbdFrame decodeKinectFrame(const kinect::frame_msg_t& msg, const CameraIntrinsi
   }
   RgbdFrame frame;
   frame.utime = msg.image.timestamp != 0 ? msg.image.timestamp : msg.timestamp;
+  // The driver stamps each stream on arrival: a Kinect v1's two streams are not synchronised.
+  if (msg.depth.timestamp != 0 && msg.depth.timestamp != frame.utime) {
+    frame.depth_utime = msg.depth.timestamp;
+  }
   frame.intrinsics = (intrinsics.width == width && intrinsics.height == height)
                          ? intrinsics
                          : intrinsics.scaled(width, height);

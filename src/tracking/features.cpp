@@ -504,6 +504,20 @@ void attachGeometry(const cv::Mat& depth_m, const CameraIntrinsics& K, const Tra
   }
 }
 
+void moveDepthsToColourTime(const SE3& T_colour_depth, FeatureSet& features) {
+  // The depth image measured the surface under the colour pixel's ray from where the camera
+  // was then. Moving that point into the colour camera's frame gives the surface's depth at
+  // the colour image's time; sideways motion hardly changes the depth of a surface facing the
+  // camera, so the point is scaled along the colour pixel's ray rather than moved off it.
+  for (std::size_t i = 0; i < features.points.size(); ++i) {
+    Eigen::Vector3d& point = features.points[i];
+    if (!features.hasDepth(i)) continue;
+    const double depth_then_m = point.z();
+    const double depth_now_m = (T_colour_depth * point).z();
+    if (depth_then_m > 0.0 && depth_now_m > 0.0) point *= depth_now_m / depth_then_m;
+  }
+}
+
 Eigen::Vector2d inverseDepthGradient(const cv::Mat& depth_m, double x, double y, double z_m) {
   // Central differences over +-kStep pixels; both sides must lie on the same surface (within
   // 15% of the centre's depth), otherwise the slope is unknown (zero).

@@ -55,6 +55,10 @@ const ConfigSchema<TrackingConfig>& TrackingConfig::schema() {
                   "depth measurements below are ignored")
           .number("max_depth_m", &C::max_depth_m, 0.05, 100.0, "m",
                   "depth measurements above are ignored; > min_depth_m")
+          .flag("depth_time_correction", &C::depth_time_correction,
+                "when a frame's depth image was taken at another time than its colour image "
+                "(Kinect v1, TUM fr1), move each feature's depth to the colour image's time "
+                "under the predicted motion")
           .number("match_ratio", &C::match_ratio, 0.3, 1.0, "", "Lowe ratio, best / second")
           .number("max_descriptor_distance", &C::max_descriptor_distance, 1, 256, "bits",
                   "largest Hamming distance accepted for ORB (SIFT uses L2 < 350, FOVIS its own "

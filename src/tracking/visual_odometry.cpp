@@ -867,6 +867,22 @@ OdometryResult VisualOdometry::startSegment(OdometryResult res, const CurrentFra
   return commit(std::move(res), curr.features, true, t_start);
 }
 
+void VisualOdometry::moveDepthsToColourTime(const RgbdFrame& frame, const SE3& T_prev_curr_pred,
+                                            CurrentFrame& curr) const {
+  if (!config_.depth_time_correction || !have_velocity_ || prev_utime_ <= 0) return;
+  const double interval_s = static_cast<double>(frame.utime - prev_utime_) * 1e-6;
+  const double colour_after_depth_s = static_cast<double>(frame.utime - frame.depthUtime()) * 1e-6;
+  // A pair further apart than the frame interval was badly associated; the motion prior says
+  // nothing reliable about it.
+  if (colour_after_depth_s == 0.0 || !(interval_s > 0.0) ||
+      std::abs(colour_after_depth_s) > interval_s) {
+    return;
+  }
+  // Constant velocity over the interval: the colour camera's pose in the depth camera's frame.
+  const SE3 T_depth_colour = expSE3(logSE3(T_prev_curr_pred) * (colour_after_depth_s / interval_s));
+  slamd::moveDepthsToColourTime(T_depth_colour.inverse(), *curr.features);
+}
+
 SE3 VisualOdometry::predictMotion(const cv::Mat& small, const CameraIntrinsics& K) {
   // Constant velocity (FOVIS: rotation from image alignment against the previous frame).
   SE3 motion_prior = have_velocity_ ? velocity_prev_curr_ : SE3::Identity();
@@ -1306,8 +1322,10 @@ OdometryResult VisualOdometry::process(const RgbdFrame& frame, const RgbdFramePt
     return startSegment(std::move(res), curr, frame, frame_ptr, t_start);
   }
 
-  const SE3 T_world_pred = T_world_prev_ * predictMotion(small, curr.K);
+  const SE3 T_prev_curr_pred = predictMotion(small, curr.K);
+  const SE3 T_world_pred = T_world_prev_ * T_prev_curr_pred;
   const double dt_s = static_cast<double>(frame.utime - last_measured_utime_) * 1e-6;
+  moveDepthsToColourTime(frame, T_prev_curr_pred, curr);
   ReferenceMeasurement measured = measureAgainstReference(T_world_pred, curr, dt_s, res.stats);
   TrackAttempt& attempt = measured.attempt;
   res.stats.num_matches = attempt.num_matches;

@@ -129,6 +129,7 @@ TEST(TumSource, ReadsASmallFolderWithPngColour) {
   EXPECT_TRUE(all.skip_messages.empty());
   const RgbdFrame& frame = *all.frames[2];
   EXPECT_EQ(frame.utime, secondsToUtime(folder.rgb_times[2]));
+  EXPECT_EQ(frame.depth_utime, secondsToUtime(folder.depth_times[2]));
   EXPECT_EQ(frame.sequence, 2);
   EXPECT_EQ(frame.color_bgr.type(), CV_8UC3);
   EXPECT_EQ(frame.gray.type(), CV_8UC1);
@@ -222,6 +223,8 @@ TEST(TumSource, FreiburgXyzIntrinsicsAndDepthValuesAreCorrect) {
   ASSERT_EQ(read.status, FrameRead::Status::kFrame) << read.message;
   const RgbdFrame& frame = *read.frame;
   EXPECT_EQ(frame.utime, 1305031102175304);
+  // fr1's depth stream runs on its own clock: this pair's depth is 14.9 ms older.
+  EXPECT_EQ(frame.depth_utime, 1305031102160407);
   EXPECT_EQ(frame.intrinsics, *source.intrinsics());
   ASSERT_EQ(frame.depth_m.size(), cv::Size(640, 480));
   const cv::Mat raw =

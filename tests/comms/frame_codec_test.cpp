@@ -124,12 +124,25 @@ TEST(FrameCodec, KinectFrameRoundTripsInEveryFormat) {
       const RgbdFrame back =
           decodeKinectFrame(encodeKinectFrame(frame, jpeg, zlib), frame.intrinsics);
       EXPECT_EQ(back.utime, frame.utime);
+      EXPECT_EQ(back.depth_utime, 0);  // depth taken with colour
       expectDepthEqual(back.depth_m, frame.depth_m, 1e-6f);
       if (!jpeg) {
         EXPECT_EQ(cv::norm(back.color_bgr, frame.color_bgr, cv::NORM_INF), 0.0);
       }
     }
   }
+}
+
+TEST(FrameCodec, KinectFrameKeepsTheDepthImagesOwnTime) {
+  RgbdFrame frame = makeFrame();
+  frame.depth_utime = frame.utime - 12000;  // a Kinect v1's depth, 12 ms before the colour
+  const kinect::frame_msg_t msg = encodeKinectFrame(frame, false, false);
+  EXPECT_EQ(msg.image.timestamp, frame.utime);
+  EXPECT_EQ(msg.depth.timestamp, frame.depth_utime);
+  const RgbdFrame back = decodeKinectFrame(msg, frame.intrinsics);
+  EXPECT_EQ(back.utime, frame.utime);
+  EXPECT_EQ(back.depth_utime, frame.depth_utime);
+  EXPECT_EQ(back.depthUtime(), frame.utime - 12000);
 }
 
 TEST(FrameCodec, KinectUnsupportedFormatsAreNamedInTheError) {

@@ -28,6 +28,29 @@ cv::Mat slantedPlaneDepth() {
   return depth;
 }
 
+TEST(MoveDepthsToColourTime, KeepsThePixelAndTakesTheDepthAtTheColourImagesTime) {
+  FeatureSet features;
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  features.points = {Eigen::Vector3d(0.3, -0.2, 2.0), Eigen::Vector3d(nan, nan, nan),
+                     Eigen::Vector3d(0.0, 0.0, 0.005)};
+  // The camera moved 1 cm forward and turned 1 degree about y between the depth image and the
+  // colour image: the depth camera sat 1 cm behind the colour camera.
+  SE3 T_colour_depth = SE3::Identity();
+  T_colour_depth.linear() = Eigen::AngleAxisd(-M_PI / 180.0, Eigen::Vector3d::UnitY()).matrix();
+  T_colour_depth.translation() = Eigen::Vector3d(0.0, 0.0, -0.01);
+  const Eigen::Vector3d before = features.points[0];
+  const Eigen::Vector3d moved = T_colour_depth * features.points[0];
+  moveDepthsToColourTime(T_colour_depth, features);
+  // On the colour pixel's ray, at the depth the point has in the colour camera's frame.
+  EXPECT_NEAR(features.points[0].z(), moved.z(), 1e-12);
+  EXPECT_LT(features.points[0].z(), before.z() - 0.005);
+  EXPECT_NEAR(features.points[0].x() / features.points[0].z(), before.x() / before.z(), 1e-12);
+  EXPECT_NEAR(features.points[0].y() / features.points[0].z(), before.y() / before.z(), 1e-12);
+  // No depth stays no depth; a point the motion would put behind the camera is left as it was.
+  EXPECT_TRUE(std::isnan(features.points[1].z()));
+  EXPECT_EQ(features.points[2], Eigen::Vector3d(0.0, 0.0, 0.005));
+}
+
 TrackingConfig wideDepthRange() {
   TrackingConfig config;
   config.min_depth_m = 0.1;

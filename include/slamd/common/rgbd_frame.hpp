@@ -19,7 +19,11 @@
 namespace slamd {
 
 struct RgbdFrame {
-  Utime utime = 0;            ///< capture time of the colour image
+  Utime utime = 0;  ///< capture time of the colour image
+  /// Capture time of the depth image when the camera does not take both at once (a Kinect v1
+  /// streams them on separate clocks: TUM fr1 pairs lie up to 17 ms apart); 0 = taken with the
+  /// colour image. Tracking moves features' depths to the colour image's time (depthUtime()).
+  Utime depth_utime = 0;
   std::int64_t sequence = 0;  ///< source frame counter (+1 per captured frame)
   std::string frame_id = "camera";
   CameraIntrinsics intrinsics;
@@ -32,6 +36,9 @@ struct RgbdFrame {
   /// Empty when the frame is consistent (types, sizes against intrinsics), otherwise a sentence
   /// naming the problem; sources call it before publishing a frame.
   std::string validationError() const;
+
+  /// depth_utime, or utime when the depth was taken with the colour image.
+  Utime depthUtime() const { return depth_utime != 0 ? depth_utime : utime; }
 };
 
 using RgbdFramePtr = std::shared_ptr<const RgbdFrame>;

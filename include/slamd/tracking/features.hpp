@@ -16,6 +16,7 @@
 #include <opencv2/features2d.hpp>
 
 #include "slamd/common/camera_intrinsics.hpp"
+#include "slamd/common/se3.hpp"
 #include "slamd/tracking/tracking_config.hpp"
 
 namespace slamd {
@@ -57,6 +58,13 @@ std::unique_ptr<FeatureExtractor> makeFeatureExtractor(const TrackingConfig& con
 /// points, and records the surface slope around each (inverseDepthGradient).
 void attachGeometry(const cv::Mat& depth_m, const CameraIntrinsics& intrinsics,
                     const TrackingConfig& config, FeatureSet& features);
+
+/// Moves each feature's point along its pixel's ray to the depth its depth-image point has in
+/// the colour camera's frame: for a depth image taken at another time than the colour image
+/// (T_colour_depth = the depth camera's pose in the colour camera's frame, the motion between
+/// the two times). The pixel stays the colour image's; a point that would land behind the
+/// camera is left as it was. Exact for a surface facing the camera, first order otherwise.
+void moveDepthsToColourTime(const SE3& T_colour_depth, FeatureSet& features);
 
 /// Depth (metres) at raw pixel (x, y) of depth_m (CV_32F, NaN = none): NaN outside
 /// [min_depth_m, max_depth_m], near the border or on a depth discontinuity (the 3x3 neighbourhood

@@ -34,6 +34,7 @@ struct TrackingConfig {
   bool undistort = true;
   double min_depth_m = 0.3;
   double max_depth_m = 5.0;
+  bool depth_time_correction = true;
 
   // --- Matching -------------------------------------------------------------------------------
   double match_ratio = 0.8;

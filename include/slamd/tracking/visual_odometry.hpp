@@ -154,6 +154,10 @@ class VisualOdometry {
                               const RgbdFramePtr& frame_ptr, std::int64_t t_start);
   /// The motion prior since the previous frame; keeps small for the next frame's alignment.
   SE3 predictMotion(const cv::Mat& small, const CameraIntrinsics& K);
+  /// The current features' depths at the colour image's time when the frame's depth image was
+  /// taken at another (tracking.depth_time_correction), under the predicted motion.
+  void moveDepthsToColourTime(const RgbdFrame& frame, const SE3& T_prev_curr_pred,
+                              CurrentFrame& curr) const;
   ReferenceMeasurement measureAgainstReference(const SE3& T_world_pred, const CurrentFrame& curr,
                                                double dt_s, OdometryStats& stats);
   /// Empty when T_world_curr is a motion the camera can make since the previous frame (dt_s
