@@ -105,6 +105,7 @@ Backend::LocalMatches Backend::addLocalEdges(const Keyframe& keyframe, BackendUp
   };
   const std::vector<LoopDetection> matches = detector_.matchLocal(keyframe, allowed, prior);
   const KeyframeInfo& query = keyframes_.at(keyframe.id);
+  std::vector<const LoopDetection*> accepted;
   for (const LoopDetection& match : matches) {
     // False-match protection: the measured relative pose must agree with the current estimate
     // (odometry drift plus earlier corrections) within what drift allows over the path between.
@@ -122,14 +123,24 @@ Backend::LocalMatches Backend::addLocalEdges(const Keyframe& keyframe, BackendUp
       continue;
     }
     out.agreeing.push_back(match);
-    if (update.num_local_edges >= config_.local_edges) continue;
-    const PoseGraphEdge edge{match.match_id, keyframe.id, match.T_match_query, match.information,
-                             EdgeKind::kLocal};
+    if (static_cast<int>(accepted.size()) < config_.local_edges) accepted.push_back(&match);
+  }
+  // Every local edge of this keyframe is measured from the same features of it: n edges counted
+  // as independent would hold n times the information those observations carry. Covariance
+  // intersection with equal weights keeps their sum consistent whatever the correlation.
+  const double information_share = config_.local_edges_share_information && !accepted.empty()
+                                       ? 1.0 / static_cast<double>(accepted.size())
+                                       : 1.0;
+  for (const LoopDetection* accepted_match : accepted) {
+    const LoopDetection& match = *accepted_match;
+    const PoseGraphEdge edge{match.match_id, keyframe.id, match.T_match_query,
+                             match.information * information_share, EdgeKind::kLocal};
     if (addEdge(edge)) {
       // An edge far from closed between keyframes far apart in the graph (drift accumulated
       // along a long cycle) is a loop in effect: the correction must spread over the whole
       // graph.
-      if (edgeChi2(edge) > config_.full_optimization_chi2 &&
+      // (Judged at the measurement's own precision, before its share.)
+      if (edgeChi2(edge) / information_share > config_.full_optimization_chi2 &&
           std::find(reach.begin(), reach.end(), match.match_id) == reach.end()) {
         update.full_optimization = true;
       }

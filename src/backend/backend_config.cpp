@@ -113,6 +113,10 @@ const ConfigSchema<BackendConfig>& BackendConfig::schema() {
                   "floor added in quadrature to a local edge's translation sigma")
           .number("local_min_sigma_rad", &C::local_min_sigma_rad, 0.0, 1.0, "rad",
                   "floor added in quadrature to a local edge's rotation sigma")
+          .flag("local_edges_share_information", &C::local_edges_share_information,
+                "the n local edges of a keyframe, measured from the same features, each get 1/n "
+                "of their information (covariance intersection), so that those observations "
+                "count once")
           .flag("optimize_every_keyframe", &C::optimize_every_keyframe,
                 "re-optimise after every keyframe that brought a local edge (otherwise only "
                 "after loops and relocalisations)")

@@ -104,9 +104,9 @@ TEST(BackendFr1Xyz, FullSlamBeatsOdometryThatDrifts) {
 }
 
 TEST(BackendFr1Xyz, FullSlamStaysCloseToOdometryOnTheLocalMap) {
-  // With the local map, odometry on this desk is nearly drift-free (0.0104 m) and the pose graph,
-  // fed pairwise keyframe measurements, adds a little error (0.0111 m; loops alone 0.0107 m): the
-  // back end must not cost more than 10%.
+  // With the local map, odometry on this desk is nearly drift-free, and the pose graph, fed
+  // pairwise keyframe measurements, adds a little error (docs/backend.md): the back end must not
+  // cost more than 10%.
   const auto folder = test::findDataset("tum_fr1_xyz");
   if (!folder) GTEST_SKIP() << test::missingDataMessage("tum_fr1_xyz");
   const Fr1Run run = runFr1(*folder, -1, 0, BackendConfig());

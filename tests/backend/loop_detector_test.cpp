@@ -4,6 +4,7 @@
 
 #include "slamd/backend/loop_detector.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <random>
@@ -315,6 +316,49 @@ TEST(Backend, WithoutLocalEdgesOptimisesOnlyOnLoops) {
   EXPECT_GE(backend.numLoops(), 1);
   EXPECT_EQ(optimisations, backend.numLoops());
   EXPECT_EQ(backend.numLocalEdges(), 0);
+}
+
+TEST(Backend, TheLocalEdgesOfAKeyframeShareTheInformationOfItsFeatures) {
+  // Two back ends, with and without the share, fed the same keyframes: they stay the same until
+  // the first keyframe that brings two or more local edges, whose edges must then hold 1/n of the
+  // information each.
+  const RenderedKeyframes& world = ringKeyframes();
+  BackendConfig shared_config;
+  shared_config.local_edges_share_information = true;
+  BackendConfig independent_config = shared_config;
+  independent_config.local_edges_share_information = false;
+  Backend shared(shared_config, roomVocabulary());
+  Backend independent(independent_config, roomVocabulary());
+  const auto localEdgesTo = [](const Backend& backend, std::int64_t id) {
+    std::vector<PoseGraphEdge> out;
+    for (const PoseGraphEdge& e : backend.graph().edges()) {
+      if (e.kind == EdgeKind::kLocal && e.to_id == id) out.push_back(e);
+    }
+    std::sort(out.begin(), out.end(),
+              [](const auto& a, const auto& b) { return a.from_id < b.from_id; });
+    return out;
+  };
+  for (const KeyframePtr& kf : world.keyframes) {
+    const BackendUpdate u_shared = shared.addKeyframe(kf);
+    const BackendUpdate u_independent = independent.addKeyframe(kf);
+    ASSERT_EQ(u_shared.num_local_edges, u_independent.num_local_edges) << kf->id;
+    const int n = u_shared.num_local_edges;
+    const std::vector<PoseGraphEdge> with_share = localEdgesTo(shared, kf->id);
+    const std::vector<PoseGraphEdge> without = localEdgesTo(independent, kf->id);
+    ASSERT_EQ(with_share.size(), static_cast<std::size_t>(n));
+    ASSERT_EQ(without.size(), static_cast<std::size_t>(n));
+    for (int k = 0; k < n; ++k) {
+      EXPECT_EQ(with_share[k].from_id, without[k].from_id);
+      EXPECT_TRUE(with_share[k].information.isApprox(without[k].information / n, 1e-12))
+          << "keyframe " << kf->id << ", edge from " << with_share[k].from_id;
+    }
+    if (n >= 2) {
+      std::printf("keyframe %ld: %d local edges, each with 1/%d of its information\n",
+                  static_cast<long>(kf->id), n, n);
+      return;
+    }
+  }
+  FAIL() << "no keyframe brought two local edges";
 }
 
 // A copy of `keyframe` as a new tracking segment would report it: its own odometry world

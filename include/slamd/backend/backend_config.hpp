@@ -80,6 +80,10 @@ struct BackendConfig {
   double local_max_discrepancy_rad = 0.2;
   double local_min_sigma_m = 0.002;
   double local_min_sigma_rad = 0.002;
+  /// The local edges a keyframe adds are all measured from its features: each gets 1/n of its
+  /// information when there are n (covariance intersection), so that together they count those
+  /// observations once.
+  bool local_edges_share_information = true;
   bool optimize_every_keyframe = true;
   /// An optimisation brought by local edges (or by a loop already nearly closed) moves only the
   /// keyframes within local_window_hops edges of the new one (at most local_window_size); the
