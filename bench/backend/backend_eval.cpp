@@ -91,6 +91,11 @@ void reportEdges(const Trajectory& truth, const std::vector<KeyframePtr>& keyfra
   std::vector<double> whitened_truth[4];
   std::vector<double> whitened_optimised[4];
   std::vector<std::pair<double, std::size_t>> worst;
+  const auto whitened = [](const PoseGraphEdge& edge, const SE3& T_world_from,
+                           const SE3& T_world_to) {
+    const Vector6d e = poseGraphEdgeError(edge.T_from_to, T_world_from, T_world_to);
+    return std::sqrt(e.dot(edge.information * e));
+  };
   const auto& edges = backend.graph().edges();
   for (std::size_t e = 0; e < edges.size(); ++e) {
     const PoseGraphEdge& edge = edges[e];
@@ -98,14 +103,10 @@ void reportEdges(const Trajectory& truth, const std::vector<KeyframePtr>& keyfra
     const SE3 T_true = T_world_true.at(edge.from_id).inverse() * T_world_true.at(edge.to_id);
     const double error_m = (T_true.inverse() * edge.T_from_to).translation().norm();
     errors[static_cast<int>(edge.kind)].push_back(error_m);
-    const Vector6d e_truth = poseGraphEdgeError(edge.T_from_to, T_world_true.at(edge.from_id),
-                                                T_world_true.at(edge.to_id));
     whitened_truth[static_cast<int>(edge.kind)].push_back(
-        std::sqrt(e_truth.dot(edge.information * e_truth)));
-    const Vector6d e_optimised =
-        poseGraphEdgeError(edge.T_from_to, backend.pose(edge.from_id), backend.pose(edge.to_id));
+        whitened(edge, T_world_true.at(edge.from_id), T_world_true.at(edge.to_id)));
     whitened_optimised[static_cast<int>(edge.kind)].push_back(
-        std::sqrt(e_optimised.dot(edge.information * e_optimised)));
+        whitened(edge, backend.pose(edge.from_id), backend.pose(edge.to_id)));
     worst.emplace_back(error_m, e);
   }
   for (int k = 0; k < 4; ++k) {
