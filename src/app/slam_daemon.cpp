@@ -780,6 +780,11 @@ void SlamDaemon::Impl::summarize(const std::vector<StageStats>& stats,
                                                 static_cast<double>(summary.plane_increments_fused)
                                           : 0.0;
   summary.plane_registrations_failed = corridor.registrations_failed.load();
+  const EkfCounters ekf = steps->filter->ekfCounters();
+  summary.direction_updates_accepted = ekf.updates_accepted;
+  summary.direction_updates_gated = ekf.updates_gated;
+  summary.direction_reanchors = ekf.reanchors;
+  summary.direction_corrections_spread = ekf.corrections_spread;
 }
 
 void SlamDaemon::Impl::logSummary(const std::vector<StageStats>& stats,
@@ -826,6 +831,12 @@ void SlamDaemon::Impl::logSummary(const std::vector<StageStats>& stats,
                          << summary.plane_increments_mean_nis << "), "
                          << summary.plane_increments_gated << " gated, "
                          << summary.plane_registrations_failed << " registrations failed";
+  }
+  if (summary.direction_updates_accepted + summary.direction_updates_gated > 0) {
+    SLAMD_LOG_INFO(kLog) << "filter: " << summary.direction_updates_accepted
+                         << " direction updates accepted, " << summary.direction_updates_gated
+                         << " gated, " << summary.direction_reanchors << " re-anchorings, "
+                         << summary.direction_corrections_spread << " spread over frames";
   }
   logDropSummary(stats, source_stats);
   if (source_stats.clock_reanchors > 0) {
@@ -985,6 +996,12 @@ bool SlamDaemon::Impl::writeMetrics(const std::vector<StageStats>& stats) {
   json.key("plane_increments_mean_nis").value(summary.plane_increments_mean_nis);
   json.key("plane_registrations_failed")
       .value(static_cast<std::int64_t>(summary.plane_registrations_failed));
+  json.endObject();
+  json.key("filter").beginObject();
+  json.key("direction_updates_accepted").value(summary.direction_updates_accepted);
+  json.key("direction_updates_gated").value(summary.direction_updates_gated);
+  json.key("reanchors").value(summary.direction_reanchors);
+  json.key("corrections_spread").value(summary.direction_corrections_spread);
   json.endObject();
   // Resident memory at the status messages, and how often the memory limit made slamd degrade.
   json.key("memory").beginObject();

@@ -11,6 +11,9 @@ namespace slamd {
 namespace {
 
 constexpr double kDegToRad = M_PI / 180.0;
+/// A direction update may always move the pose by this many sigmas of the latest increment's
+/// noise (the whole 3-vector's), whatever the correction rate limits say.
+constexpr double kCorrectionIncrementSigmas = 3.0;
 // |z| of the camera-frame direction below which the vanishing point is treated as at infinity in
 // the image (at f = 525 px this is a point ~5e5 px from the principal point).
 constexpr double kMinDirectionDepth = 1e-3;
@@ -269,6 +272,16 @@ EkfPredictStatus PoseEkf::predict(const SE3& T_prev_curr, const Matrix6d& covari
   symmetrize(P_);
   T_world_camera_ = normalizedSE3(T_world_camera_ * T_prev_curr);
   last_increment_noise_ = Q;
+  // What this increment alone could have got wrong is always correctable at once; only more than
+  // that (error accumulated over many frames, or a jump) is held to the rate limit.
+  const auto budget = [dt_s](double limit_per_s, const Eigen::Matrix3d& increment_noise) {
+    if (!(limit_per_s > 0.0) || !(dt_s > 0.0)) return std::numeric_limits<double>::infinity();
+    return std::max(limit_per_s * dt_s,
+                    kCorrectionIncrementSigmas * std::sqrt(increment_noise.trace()));
+  };
+  correction_budget_rad_ =
+      budget(config_.max_correction_rate_degps * kDegToRad, Q.bottomRightCorner<3, 3>());
+  correction_budget_m_ = budget(config_.max_correction_speed_mps, Q.topLeftCorner<3, 3>());
   return status;
 }
 
@@ -330,7 +343,21 @@ void PoseEkf::applyUpdate(const Eigen::MatrixXd& H, const Eigen::Vector2d& innov
     K.setZero();
     K.middleRows(k, 2) = landmark_rows;
   }
-  const Eigen::VectorXd dx = K * innovation;
+  Eigen::VectorXd dx = K * innovation;
+  const double turn_rad = dx.segment<3>(3).norm();
+  const double shift_m = dx.head<3>().norm();
+  double gain_scale = 1.0;
+  if (turn_rad > correction_budget_rad_) gain_scale = correction_budget_rad_ / turn_rad;
+  if (shift_m > correction_budget_m_) {
+    gain_scale = std::min(gain_scale, correction_budget_m_ / shift_m);
+  }
+  if (gain_scale < 1.0) {
+    K *= gain_scale;
+    dx *= gain_scale;
+    ++counters_.corrections_spread;
+  }
+  correction_budget_rad_ -= gain_scale * turn_rad;
+  correction_budget_m_ -= gain_scale * shift_m;
   Eigen::MatrixXd I_KH = -K * H;
   I_KH.diagonal().array() += 1.0;
   P_ = I_KH * P_ * I_KH.transpose() + K * R_px * K.transpose();

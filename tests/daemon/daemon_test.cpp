@@ -137,6 +137,8 @@ TEST_F(DaemonInProcess, InAPlainCorridorTheCorridorModeComesOnAndFusesPlaneOdome
   EXPECT_GE(summary.corridor_mode_frames, 10u);
   EXPECT_GE(summary.plane_increments_fused, 5u);
   EXPECT_GT(summary.plane_increments_mean_nis, 0.0);
+  // The corridor's vanishing points (or its walls' axes) correct the EKF, and the summary says so.
+  EXPECT_GT(summary.direction_updates_accepted, 0);
 
   // Switched off, nothing of it runs.
   const DaemonSummary without = plainCorridor(false);

@@ -565,18 +565,28 @@ TEST(PoseEkf, LostFramesDoNotRollTheCameraAboutTheVanishingDirection) {
 }
 
 /// A camera panning across a corridor (+z world) for 250 frames with exact odometry and a tiny
-/// covariance, except that at frame 150 one increment turns 0.5 degrees too far about the camera's
-/// x axis (pitch, observable from the corridor's point) with the same over-confident covariance.
-/// `scatter_px` adds an alternating offset to every detection after the jump. Returns the final
-/// rotation error (degrees) perpendicular to the corridor (the part a vanishing point observes;
-/// the camera is turned 10 degrees, so a sixth of the jump is about the corridor itself) and
-/// fills the counters.
-double rotationErrorAfterOdometryJump(int reanchor_detections, double scatter_px,
-                                      EkfCounters* counters) {
+/// covariance, except that at frame 150 one increment turns `jump.jump_deg` too far about the
+/// camera's x axis (pitch, observable from the corridor's point) with the same over-confident
+/// covariance. `jump.scatter_px` adds an alternating offset to every detection after the jump.
+struct OdometryJump {
+  int reanchor_detections = 5;
+  double jump_deg = 0.5;
+  double scatter_px = 0.0;
+  double max_correction_rate_degps = FilterConfig{}.max_correction_rate_degps;
+};
+struct AfterOdometryJump {
+  /// final rotation error perpendicular to the corridor (the part a vanishing point observes; the
+  /// camera is turned 10 degrees, so a sixth of the jump is about the corridor itself), degrees
+  double error_deg = 0.0;
+  double largest_update_turn_deg = 0.0;  ///< the most one frame's update turned the pose
+  EkfCounters counters;
+};
+AfterOdometryJump runOdometryJump(const OdometryJump& jump) {
   const CameraIntrinsics K;
   FilterConfig config;
   config.landmark_probation = 0;
-  config.reanchor_detections = reanchor_detections;
+  config.reanchor_detections = jump.reanchor_detections;
+  config.max_correction_rate_degps = jump.max_correction_rate_degps;
   PoseEkf ekf(config, K);
   constexpr double kDt = 1.0 / 30.0;
   SE3 T_world_true = SE3::Identity();
@@ -586,6 +596,7 @@ double rotationErrorAfterOdometryJump(int reanchor_detections, double scatter_px
   std::normal_distribution<double> pixel_noise(0.0, 0.2);
   const Eigen::Vector3d corridor_world = Eigen::Vector3d::UnitZ();
   const Matrix6d tight = Matrix6d::Identity() * 1e-10;
+  AfterOdometryJump out;
   for (int frame = 0; frame < 250; ++frame) {
     SE3 step_true = SE3::Identity();
     step_true.linear() =
@@ -595,24 +606,35 @@ double rotationErrorAfterOdometryJump(int reanchor_detections, double scatter_px
     SE3 step_measured = step_true;
     if (frame == 150) {
       step_measured.linear() =
-          step_true.linear() * expSO3(Eigen::Vector3d(0.5 * M_PI / 180.0, 0, 0));
+          step_true.linear() * expSO3(Eigen::Vector3d(jump.jump_deg * M_PI / 180.0, 0, 0));
     }
     ekf.predict(step_measured, tight, kDt);
     Eigen::Vector2d vp = K.project(T_world_true.linear().transpose() * corridor_world) +
                          Eigen::Vector2d(pixel_noise(rng), pixel_noise(rng));
-    if (frame > 150) vp.y() += (frame % 2 == 0 ? 1.0 : -1.0) * scatter_px;
+    if (frame > 150) vp.y() += (frame % 2 == 0 ? 1.0 : -1.0) * jump.scatter_px;
+    const Eigen::Matrix3d R_predicted = ekf.T_world_camera().linear();
     ekf.updateVanishingPoint(vp, 0.04 * Eigen::Matrix2d::Identity());
+    const double turn_deg =
+        logSO3(R_predicted.transpose() * ekf.T_world_camera().linear()).norm() * 180.0 / M_PI;
+    out.largest_update_turn_deg = std::max(out.largest_update_turn_deg, turn_deg);
   }
-  *counters = ekf.counters();
+  out.counters = ekf.counters();
   const Eigen::Vector3d error_world =
       logSO3(ekf.T_world_camera().linear() * T_world_true.linear().transpose());
-  return (error_world - error_world.dot(corridor_world) * corridor_world).norm() * 180.0 / M_PI;
+  out.error_deg =
+      (error_world - error_world.dot(corridor_world) * corridor_world).norm() * 180.0 / M_PI;
+  return out;
 }
 
 TEST(PoseEkf, ReanchorsToAnEstablishedLandmarkAfterAnOdometryJump) {
-  EkfCounters with, without;
-  const double error_with_deg = rotationErrorAfterOdometryJump(5, 0.0, &with);
-  const double error_without_deg = rotationErrorAfterOdometryJump(0, 0.0, &without);
+  const AfterOdometryJump run_with = runOdometryJump({});
+  OdometryJump no_reanchoring;
+  no_reanchoring.reanchor_detections = 0;
+  const AfterOdometryJump run_without = runOdometryJump(no_reanchoring);
+  const EkfCounters& with = run_with.counters;
+  const EkfCounters& without = run_without.counters;
+  const double error_with_deg = run_with.error_deg;
+  const double error_without_deg = run_without.error_deg;
   RecordProperty("error_with_deg", std::to_string(error_with_deg));
   RecordProperty("error_without_deg", std::to_string(error_without_deg));
   EXPECT_EQ(with.reanchors, 1);
@@ -627,10 +649,32 @@ TEST(PoseEkf, ReanchorsToAnEstablishedLandmarkAfterAnOdometryJump) {
 TEST(PoseEkf, GatedDetectionsThatDisagreeDoNotReanchor) {
   // After the jump the detections alternate 40 px above and below the truth: all gated, and far
   // from each other, so they are bad detections, not a pose jump. Nothing may move the pose.
-  EkfCounters counters;
-  rotationErrorAfterOdometryJump(5, 40.0, &counters);
+  OdometryJump scattered;
+  scattered.scatter_px = 40.0;
+  const EkfCounters counters = runOdometryJump(scattered).counters;
   EXPECT_EQ(counters.reanchors, 0);
   EXPECT_GE(counters.updates_gated, 5);
+}
+
+TEST(PoseEkf, ALargeCorrectionIsSpreadOverFramesAtTheCorrectionRateLimit) {
+  // A 2 degree jump: re-anchoring would take it back in one frame. At 10 deg/s (a third of a
+  // degree per frame at 30 Hz; the tight odometry covariance allows less) it takes several, and
+  // ends where the unlimited filter does.
+  OdometryJump jump;
+  jump.jump_deg = 2.0;
+  const AfterOdometryJump limited = runOdometryJump(jump);
+  jump.max_correction_rate_degps = 0.0;
+  const AfterOdometryJump unlimited = runOdometryJump(jump);
+  RecordProperty("largest_turn_limited_deg", std::to_string(limited.largest_update_turn_deg));
+  RecordProperty("largest_turn_unlimited_deg", std::to_string(unlimited.largest_update_turn_deg));
+  EXPECT_EQ(limited.counters.reanchors, 1);
+  EXPECT_EQ(unlimited.counters.reanchors, 1);
+  EXPECT_GT(unlimited.largest_update_turn_deg, 1.5);
+  EXPECT_LE(limited.largest_update_turn_deg, 10.0 / 30.0 + 1e-9);
+  EXPECT_GE(limited.counters.corrections_spread, 5);
+  EXPECT_EQ(unlimited.counters.corrections_spread, 0);
+  EXPECT_LT(limited.error_deg, 0.05);
+  EXPECT_LT(unlimited.error_deg, 0.05);
 }
 
 TEST(PoseEkf, CorrectionMovesPoseAndLandmarksTogether) {

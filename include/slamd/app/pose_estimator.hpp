@@ -70,6 +70,9 @@ class PoseEstimator {
   void reset();
   bool corridorModeOn() const { return corridor_.on.load(std::memory_order_relaxed); }
   const CorridorModeStats& corridorMode() const { return corridor_; }
+  /// The EKF's counters since the first frame or the last reset (zero before the first frame).
+  /// Owned by the filter thread: read them only once it has stopped.
+  EkfCounters ekfCounters() const { return filter_ ? filter_->ekf().counters() : EkfCounters{}; }
 
  private:
   /// Updates the corridor mode from this frame's tracking.

@@ -118,6 +118,13 @@ struct DaemonSummary {
   std::uint64_t plane_increments_unmatched = 0;
   double plane_increments_mean_nis = 0.0;
   std::uint64_t plane_registrations_failed = 0;
+  // The EKF's direction updates (vanishing points and plane axes) since the last RESET: accepted,
+  // gated, re-anchorings after an odometry jump, and updates spread over several frames
+  // (filter.max_correction_rate_degps).
+  std::int64_t direction_updates_accepted = 0;
+  std::int64_t direction_updates_gated = 0;
+  std::int64_t direction_reanchors = 0;
+  std::int64_t direction_corrections_spread = 0;
   /// Capture-to-pose latency of each minute of the run (the last one may be shorter).
   std::vector<LatencyWindow> end_to_end_by_minute;
 };

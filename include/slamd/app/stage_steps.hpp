@@ -330,6 +330,7 @@ class FilterStep : public StepBase {
   void reset() override { estimator_.reset(); }
   /// The corridor mode's counts (any thread).
   const CorridorModeStats& corridorMode() const { return estimator_.corridorMode(); }
+  EkfCounters ekfCounters() const { return estimator_.ekfCounters(); }
 
  private:
   PoseEstimator estimator_;

@@ -68,6 +68,15 @@
 // normalised to sigma^2 per observable axis): a wrong increment turns and shifts the camera
 // together, so the translation is corrected with the rotation (docs/filter.md). The rotation
 // about the direction itself, which no vanishing point observes, is not widened.
+// Spread corrections (filter.max_correction_rate_degps, max_correction_speed_mps): the direction
+// updates between two predictions may turn the pose by at most rate * dt and move it by at most
+// speed * dt, or by 3 sigma of the latest increment's noise (rotation, translation) where that is
+// more: what one increment could have got wrong is corrected at once. An update that would move it
+// further (a re-anchoring, the first detection after a loss) is applied with its gain scaled down
+// to fit; the Joseph form below is the exact covariance
+// for any gain, so the part not applied stays in P and the next detections apply it. Why: the
+// published pose feeds controllers that differentiate it; a correction of a degree or two in one
+// frame is a spike in angular rate that the robot never made.
 // Covariance updates use the Joseph form (I - KH) P (I - KH)^T + K R K^T.
 // Reset: after an update moves the rotation by dtheta (R' = R exp(dtheta)), the rotation block of
 // the covariance is re-expressed at R' with e' = exp(dtheta)^T e: the error is kept unchanged in
@@ -95,6 +104,7 @@
 // throws: it is rejected or replaced by a documented fallback, reported by the status and counted.
 
 #include <cstdint>
+#include <limits>
 #include <vector>
 
 #include <Eigen/Core>
@@ -185,6 +195,9 @@ struct EkfCounters {
   /// pose re-anchored to an established landmark after consistent gated detections (an odometry
   /// jump; see filter.reanchor_detections)
   std::int64_t reanchors = 0;
+  /// updates applied with a reduced gain because they would have moved the pose faster than
+  /// filter.max_correction_rate_degps / max_correction_speed_mps (the rest follows on later frames)
+  std::int64_t corrections_spread = 0;
   std::int64_t axis_updates_accepted = 0;  ///< of updates_accepted: from plane axes
   std::int64_t axis_updates_gated = 0;     ///< of updates_gated: from plane axes
 };
@@ -356,6 +369,10 @@ class PoseEkf {
   std::int64_t vp_calls_ = 0;
   /// G Q G^T of the latest prediction (the shape of an odometry increment's error, re-anchoring)
   Matrix6d last_increment_noise_ = Matrix6d::Zero();
+  /// What direction updates may still move the pose until the next prediction (rad, m): the
+  /// correction rate limits times the prediction's dt; unlimited before the first timed one.
+  double correction_budget_rad_ = std::numeric_limits<double>::infinity();
+  double correction_budget_m_ = std::numeric_limits<double>::infinity();
   int next_landmark_id_ = 0;
   EkfCounters counters_;
 };
