@@ -136,10 +136,10 @@ const ConfigSchema<FilterConfig>& FilterConfig::schema() {
           .number("reanchor_min_updates", &C::reanchor_min_updates, 1, 1000000, "updates",
                   "accepted updates that make a landmark established")
           .number("max_correction_rate_degps", &C::max_correction_rate_degps, 0.0, 10000.0, "deg/s",
-                  "direction updates turn the pose at most this fast; a larger correction is "
+                  "a re-anchoring turns the pose at most this fast; a larger correction is "
                   "spread over several frames; 0 = no limit")
           .number("max_correction_speed_mps", &C::max_correction_speed_mps, 0.0, 1000.0, "m/s",
-                  "direction updates move the pose at most this fast; a larger correction is "
+                  "a re-anchoring moves the pose at most this fast; a larger correction is "
                   "spread over several frames; 0 = no limit")
           .number("min_update_lines", &C::min_update_lines, 2, 1000, "lines",
                   "a vanishing point supported by fewer lines is reported but not given to the "

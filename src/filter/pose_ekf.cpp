@@ -351,10 +351,14 @@ void PoseEkf::applyUpdate(const Eigen::MatrixXd& H, const Eigen::Vector2d& innov
   if (shift_m > correction_budget_m_) {
     gain_scale = std::min(gain_scale, correction_budget_m_ / shift_m);
   }
-  if (gain_scale < 1.0) {
+  if (!spreading_correction_) {
+    gain_scale = 1.0;
+  } else if (gain_scale < 1.0) {
     K *= gain_scale;
     dx *= gain_scale;
     ++counters_.corrections_spread;
+  } else {
+    spreading_correction_ = false;  // the re-anchoring's correction has been applied
   }
   correction_budget_rad_ -= gain_scale * turn_rad;
   correction_budget_m_ -= gain_scale * shift_m;
@@ -453,6 +457,7 @@ bool PoseEkf::reanchorAfterGating(std::size_t index, const Observation& observat
     return false;
   }
   *result = widened;
+  spreading_correction_ = true;
   acceptUpdate(index, H, observation, result);
   ++counters_.reanchors;
   return true;

@@ -677,6 +677,27 @@ TEST(PoseEkf, ALargeCorrectionIsSpreadOverFramesAtTheCorrectionRateLimit) {
   EXPECT_LT(unlimited.error_deg, 0.05);
 }
 
+TEST(PoseEkf, AnOrdinaryUpdateInsideTheGateIsAppliedAtOnce) {
+  // After an increment with a large covariance (a bridged loss) the pose is 1.7 degrees uncertain
+  // about each axis; the next increment is tight (so the rate limit, were it applied, would allow
+  // a third of a degree). A detection 20 px (2.2 degrees) off lies inside the gate: the published
+  // covariance admitted it, and the whole correction is applied in this frame.
+  const CameraIntrinsics K;
+  PoseEkf ekf(FilterConfig{}, K);
+  ASSERT_GE(ekf.addLandmark(Eigen::Vector2d(K.cx, K.cy), 0.04 * Eigen::Matrix2d::Identity()), 0);
+  constexpr double kDt = 1.0 / 30.0;
+  ekf.predict(SE3::Identity(), Matrix6d::Identity() * 1e-3, kDt);
+  ekf.predict(SE3::Identity(), Matrix6d::Identity() * 1e-10, kDt);
+  const Eigen::Matrix3d R_before = ekf.T_world_camera().linear();
+  const VpUpdateResult result = ekf.updateVanishingPoint(Eigen::Vector2d(K.cx + 20.0, K.cy),
+                                                         0.04 * Eigen::Matrix2d::Identity());
+  ASSERT_EQ(result.status, VpUpdateStatus::kAccepted);
+  const double turn_deg =
+      logSO3(R_before.transpose() * ekf.T_world_camera().linear()).norm() * 180.0 / M_PI;
+  EXPECT_GT(turn_deg, 1.5);
+  EXPECT_EQ(ekf.counters().corrections_spread, 0);
+}
+
 TEST(PoseEkf, CorrectionMovesPoseAndLandmarksTogether) {
   OneLandmarkFixture f;
   Eigen::Vector2d before;

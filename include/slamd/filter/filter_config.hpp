@@ -123,7 +123,7 @@ struct FilterConfig {
   /// new one was created at the wrong pose.
   int reanchor_detections = 5;
   int reanchor_min_updates = 100;
-  /// How fast direction updates may move the pose (pose_ekf.hpp, "Spread corrections"): a larger
+  /// How fast a re-anchoring may move the pose (pose_ekf.hpp, "Spread corrections"): a larger
   /// correction is applied over several frames with a reduced gain. At 30 Hz, 10 deg/s and
   /// 0.1 m/s are 0.33 degree and 3.3 mm per frame: a published pose that a controller
   /// differentiates never jumps by a re-anchoring's degree or two. 0 = no limit.

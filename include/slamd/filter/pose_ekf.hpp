@@ -68,15 +68,20 @@
 // normalised to sigma^2 per observable axis): a wrong increment turns and shifts the camera
 // together, so the translation is corrected with the rotation (docs/filter.md). The rotation
 // about the direction itself, which no vanishing point observes, is not widened.
-// Spread corrections (filter.max_correction_rate_degps, max_correction_speed_mps): the direction
-// updates between two predictions may turn the pose by at most rate * dt and move it by at most
-// speed * dt, or by 3 sigma of the latest increment's noise (rotation, translation) where that is
-// more: what one increment could have got wrong is corrected at once. An update that would move it
-// further (a re-anchoring, the first detection after a loss) is applied with its gain scaled down
-// to fit; the Joseph form below is the exact covariance
-// for any gain, so the part not applied stays in P and the next detections apply it. Why: the
-// published pose feeds controllers that differentiate it; a correction of a degree or two in one
-// frame is a spike in angular rate that the robot never made.
+// Spread corrections (filter.max_correction_rate_degps, max_correction_speed_mps): a
+// re-anchoring's correction is applied at a limited rate. From the re-anchoring on, the updates
+// between two predictions may turn the pose by at most rate * dt and move it by at most speed * dt
+// (or by 3 sigma of the latest increment's noise, rotation and translation, where that is more:
+// what one increment could have got wrong is corrected at once). An update that would move it
+// further has its gain scaled down to fit; the Joseph form below is the exact covariance for any
+// gain, so the part not applied stays in P and the next detections apply it. The first update
+// that fits ends the spreading. Why: the published pose feeds controllers that differentiate it; a
+// re-anchoring moves it by a degree or two that the pose's own covariance did not admit, and in
+// one frame that is a spike in angular rate that the robot never made. Ordinary updates are not
+// limited: they lie inside the gate, so the covariance published with the earlier poses allowed
+// them, and spreading them only delays the pose (on the plain corridors, the correction when the
+// corridor's vanishing point comes back after the end wall was still under way when the walk
+// ended, docs/filter.md).
 // Covariance updates use the Joseph form (I - KH) P (I - KH)^T + K R K^T.
 // Reset: after an update moves the rotation by dtheta (R' = R exp(dtheta)), the rotation block of
 // the covariance is re-expressed at R' with e' = exp(dtheta)^T e: the error is kept unchanged in
@@ -195,8 +200,8 @@ struct EkfCounters {
   /// pose re-anchored to an established landmark after consistent gated detections (an odometry
   /// jump; see filter.reanchor_detections)
   std::int64_t reanchors = 0;
-  /// updates applied with a reduced gain because they would have moved the pose faster than
-  /// filter.max_correction_rate_degps / max_correction_speed_mps (the rest follows on later frames)
+  /// updates applied with a reduced gain because a re-anchoring would have moved the pose faster
+  /// than filter.max_correction_rate_degps / max_correction_speed_mps (the rest follows later)
   std::int64_t corrections_spread = 0;
   std::int64_t axis_updates_accepted = 0;  ///< of updates_accepted: from plane axes
   std::int64_t axis_updates_gated = 0;     ///< of updates_gated: from plane axes
@@ -373,6 +378,9 @@ class PoseEkf {
   /// correction rate limits times the prediction's dt; unlimited before the first timed one.
   double correction_budget_rad_ = std::numeric_limits<double>::infinity();
   double correction_budget_m_ = std::numeric_limits<double>::infinity();
+  /// A re-anchoring's correction is being spread: set by the re-anchoring, cleared by the first
+  /// update that fits in the budget.
+  bool spreading_correction_ = false;
   int next_landmark_id_ = 0;
   EkfCounters counters_;
 };
