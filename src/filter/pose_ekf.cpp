@@ -92,6 +92,7 @@ void PoseEkf::reset(const SE3& T_world_camera, const Matrix6d& pose_covariance) 
   retired_.clear();
   P_ = pose_covariance;
   symmetrize(P_);
+  spreading_correction_ = false;
 }
 
 // --- models ----------------------------------------------------------------------------------
@@ -344,24 +345,8 @@ void PoseEkf::applyUpdate(const Eigen::MatrixXd& H, const Eigen::Vector2d& innov
     K.middleRows(k, 2) = landmark_rows;
   }
   Eigen::VectorXd dx = K * innovation;
-  const double turn_rad = dx.segment<3>(3).norm();
-  const double shift_m = dx.head<3>().norm();
-  double gain_scale = 1.0;
-  if (turn_rad > correction_budget_rad_) gain_scale = correction_budget_rad_ / turn_rad;
-  if (shift_m > correction_budget_m_) {
-    gain_scale = std::min(gain_scale, correction_budget_m_ / shift_m);
-  }
-  if (!spreading_correction_) {
-    gain_scale = 1.0;
-  } else if (gain_scale < 1.0) {
-    K *= gain_scale;
-    dx *= gain_scale;
-    ++counters_.corrections_spread;
-  } else {
-    spreading_correction_ = false;  // the re-anchoring's correction has been applied
-  }
-  correction_budget_rad_ -= gain_scale * turn_rad;
-  correction_budget_m_ -= gain_scale * shift_m;
+  // A landmark-only (Schmidt) update does not move the pose: it neither uses nor ends a spread.
+  if (only_landmark_index < 0) limitReanchoringCorrection(K, dx);
   Eigen::MatrixXd I_KH = -K * H;
   I_KH.diagonal().array() += 1.0;
   P_ = I_KH * P_ * I_KH.transpose() + K * R_px * K.transpose();
@@ -407,6 +392,28 @@ void PoseEkf::acceptUpdate(std::size_t index, const Eigen::MatrixXd& H,
   if (observation.kind == DirectionMeasurement::kSurfaceAxis) ++counters_.axis_updates_accepted;
   result->status = VpUpdateStatus::kAccepted;
   result->accepted = true;
+}
+
+void PoseEkf::limitReanchoringCorrection(Eigen::MatrixXd& K, Eigen::VectorXd& dx) {
+  const double turn_rad = dx.segment<3>(3).norm();
+  const double shift_m = dx.head<3>().norm();
+  double gain_scale = 1.0;
+  if (turn_rad > correction_budget_rad_) gain_scale = correction_budget_rad_ / turn_rad;
+  if (shift_m > correction_budget_m_) {
+    gain_scale = std::min(gain_scale, correction_budget_m_ / shift_m);
+  }
+  if (!spreading_correction_) {
+    gain_scale = 1.0;
+  } else if (gain_scale < 1.0) {
+    K *= gain_scale;
+    dx *= gain_scale;
+    ++counters_.corrections_spread;
+  } else {
+    spreading_correction_ = false;  // the re-anchoring's correction has been applied
+  }
+  // What is left for this frame; an unlimited update may have used more than there was.
+  correction_budget_rad_ = std::max(0.0, correction_budget_rad_ - gain_scale * turn_rad);
+  correction_budget_m_ = std::max(0.0, correction_budget_m_ - gain_scale * shift_m);
 }
 
 bool PoseEkf::reanchorAfterGating(std::size_t index, const Observation& observation,
@@ -753,6 +760,7 @@ void PoseEkf::setPose(const SE3& T_world_camera, const Matrix6d& pose_covariance
     P_.topRightCorner(6, n - 6).setZero();
     P_.bottomLeftCorner(n - 6, 6).setZero();
   }
+  spreading_correction_ = false;  // a pose set from outside replaces what was being corrected
 }
 
 void PoseEkf::applyCorrection(const SE3& T_corrected_world) {

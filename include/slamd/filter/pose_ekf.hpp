@@ -343,6 +343,10 @@ class PoseEkf {
                          const Observation& observation, VpUpdateResult* result);
   void acceptUpdate(std::size_t index, const Eigen::MatrixXd& H, const Observation& observation,
                     VpUpdateResult* result);
+  /// After a re-anchoring, scales the gain K and the state update dx down so that the pose moves
+  /// no more than this frame's correction budget ("Spread corrections"); ends the spread once an
+  /// update fits.
+  void limitReanchoringCorrection(Eigen::MatrixXd& K, Eigen::VectorXd& dx);
   /// Records a gated vanishing point of landmark index's direction; when the last
   /// reanchor_detections of them agree, widens the pose covariance and applies this one.
   /// True when it did (result updated, status kAccepted); false leaves the state unchanged.
