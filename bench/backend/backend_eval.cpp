@@ -87,6 +87,9 @@ void reportEdges(const Trajectory& truth, const std::vector<KeyframePtr>& keyfra
   }
   const char* names[] = {"odometry", "loop", "local", "relocalization"};
   std::vector<double> errors[4];
+  // Error against the edge's true baseline (from 1 cm up: shorter ones say little).
+  std::vector<double> error_per_baseline[4];
+  std::vector<double> baselines_m[4];
   // Whitened (sqrt of e^T Omega e): against the truth and against the optimised poses.
   std::vector<double> whitened_truth[4];
   std::vector<double> whitened_optimised[4];
@@ -103,6 +106,11 @@ void reportEdges(const Trajectory& truth, const std::vector<KeyframePtr>& keyfra
     const SE3 T_true = T_world_true.at(edge.from_id).inverse() * T_world_true.at(edge.to_id);
     const double error_m = (T_true.inverse() * edge.T_from_to).translation().norm();
     errors[static_cast<int>(edge.kind)].push_back(error_m);
+    const double baseline_m = T_true.translation().norm();
+    baselines_m[static_cast<int>(edge.kind)].push_back(baseline_m);
+    if (baseline_m >= 0.01) {
+      error_per_baseline[static_cast<int>(edge.kind)].push_back(error_m / baseline_m);
+    }
     whitened_truth[static_cast<int>(edge.kind)].push_back(
         whitened(edge, T_world_true.at(edge.from_id), T_world_true.at(edge.to_id)));
     whitened_optimised[static_cast<int>(edge.kind)].push_back(
@@ -119,6 +127,11 @@ void reportEdges(const Trajectory& truth, const std::vector<KeyframePtr>& keyfra
         "poses %.2f / %.2f (a 6-dof Gaussian: 2.31 / 3.55)\n",
         percentileOf(whitened_truth[k], 50), percentileOf(whitened_truth[k], 95),
         percentileOf(whitened_optimised[k], 50), percentileOf(whitened_optimised[k], 95));
+    std::printf(
+        "    true baseline median %.4f m; error / baseline (baselines of 1 cm or more) median "
+        "%.3f, p95 %.3f\n",
+        percentileOf(baselines_m[k], 50), percentileOf(error_per_baseline[k], 50),
+        percentileOf(error_per_baseline[k], 95));
   }
   std::sort(worst.rbegin(), worst.rend());
   for (std::size_t w = 0; w < std::min<std::size_t>(10, worst.size()); ++w) {
