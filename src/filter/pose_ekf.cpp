@@ -398,18 +398,18 @@ void PoseEkf::limitReanchoringCorrection(Eigen::MatrixXd& K, Eigen::VectorXd& dx
   const double turn_rad = dx.segment<3>(3).norm();
   const double shift_m = dx.head<3>().norm();
   double gain_scale = 1.0;
-  if (turn_rad > correction_budget_rad_) gain_scale = correction_budget_rad_ / turn_rad;
-  if (shift_m > correction_budget_m_) {
-    gain_scale = std::min(gain_scale, correction_budget_m_ / shift_m);
-  }
-  if (!spreading_correction_) {
-    gain_scale = 1.0;
-  } else if (gain_scale < 1.0) {
-    K *= gain_scale;
-    dx *= gain_scale;
-    ++counters_.corrections_spread;
-  } else {
-    spreading_correction_ = false;  // the re-anchoring's correction has been applied
+  if (spreading_correction_) {
+    if (turn_rad > correction_budget_rad_) gain_scale = correction_budget_rad_ / turn_rad;
+    if (shift_m > correction_budget_m_) {
+      gain_scale = std::min(gain_scale, correction_budget_m_ / shift_m);
+    }
+    if (gain_scale < 1.0) {
+      K *= gain_scale;
+      dx *= gain_scale;
+      ++counters_.corrections_spread;
+    } else {
+      spreading_correction_ = false;  // the re-anchoring's correction has been applied
+    }
   }
   // What is left for this frame; an unlimited update may have used more than there was.
   correction_budget_rad_ = std::max(0.0, correction_budget_rad_ - gain_scale * turn_rad);
