@@ -125,8 +125,10 @@ void reportEdges(const Trajectory& truth, const std::vector<KeyframePtr>& keyfra
     if (baseline_m >= 0.01) {
       error_per_baseline[static_cast<int>(edge.kind)].push_back(error_m / baseline_m);
     }
+    const Vector6d e_true = poseGraphEdgeError(edge.T_from_to, T_world_true.at(edge.from_id),
+                                               T_world_true.at(edge.to_id));
     whitened_truth[static_cast<int>(edge.kind)].push_back(
-        whitened(edge, T_world_true.at(edge.from_id), T_world_true.at(edge.to_id)));
+        std::sqrt(e_true.dot(edge.information * e_true)));
     whitened_optimised[static_cast<int>(edge.kind)].push_back(
         whitened(edge, backend.pose(edge.from_id), backend.pose(edge.to_id)));
     worst.emplace_back(error_m, e);
@@ -134,8 +136,6 @@ void reportEdges(const Trajectory& truth, const std::vector<KeyframePtr>& keyfra
     while (bucket + 1 < kNumBuckets && baseline_m >= kBaselineBucketsM[bucket + 1]) ++bucket;
     Calibration& c = calibration[static_cast<int>(edge.kind)][bucket];
     const Matrix6d covariance = edge.information.inverse();
-    const Vector6d e_true = poseGraphEdgeError(edge.T_from_to, T_world_true.at(edge.from_id),
-                                               T_world_true.at(edge.to_id));
     const Eigen::Vector3d e_translation = e_true.head<3>();
     const Eigen::Vector3d e_rotation = e_true.tail<3>();
     c.whitened_translation.push_back(
@@ -143,8 +143,7 @@ void reportEdges(const Trajectory& truth, const std::vector<KeyframePtr>& keyfra
     c.whitened_rotation.push_back(
         std::sqrt(e_rotation.dot(covariance.bottomRightCorner<3, 3>().ldlt().solve(e_rotation))));
     c.rotation_error_sum += e_rotation;
-    c.rotation_error_deg.push_back(
-        Eigen::AngleAxisd((T_true.inverse() * edge.T_from_to).rotation()).angle() * 180.0 / M_PI);
+    c.rotation_error_deg.push_back(e_rotation.norm() * 180.0 / M_PI);  // the log's angle
     if (baseline_m >= 0.01) {
       c.along_per_baseline.push_back(
           (edge.T_from_to.translation() - T_true.translation()).dot(T_true.translation()) /
