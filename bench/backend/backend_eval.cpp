@@ -30,6 +30,7 @@
 
 #include <opencv2/core.hpp>
 
+#include "backend_eval_setup.hpp"
 #include "slamd/backend/backend.hpp"
 #include "slamd/backend/keyframe_trajectory.hpp"
 #include "slamd/common/program_options.hpp"
@@ -39,7 +40,6 @@
 #include "slamd/eval/trajectory_error.hpp"
 #include "slamd/sources/create_frame_source.hpp"
 #include "slamd/tracking/visual_odometry.hpp"
-#include "vocabulary_training.hpp"
 
 using namespace slamd;
 
@@ -247,25 +247,12 @@ int main(int argc, char** argv) {
 
   std::string spec = options.value("source");
   if (spec.empty()) spec = "synthetic:" + options.value("scene");
-  const bool synthetic = spec.rfind("synthetic:", 0) == 0;
-  Config config;
-  std::unique_ptr<FrameSource> source;
-  BackendConfig backend_config;
-  TrackingConfig tracking;
-  try {
-    config = options.loadConfig(synthetic ? SLAMD_SOURCE_DIR "/config/synthetic.yaml"
-                                          : SLAMD_SOURCE_DIR "/config/tum_fr1.yaml");
-    backend_config = BackendConfig::load(config);
-    tracking = TrackingConfig::load(config);
-    source = createFrameSource(spec, config);
-    source->open();
-  } catch (const ConfigError& e) {
-    std::cerr << e.what() << "\n";
-    return kExitConfigError;
-  } catch (const SourceError& e) {
-    std::cerr << e.what() << "\n";
-    return kExitSourceError;
-  }
+  BackendEvalSetup setup;
+  if (const int exit_code = openBackendEvalSetup(options, spec, setup)) return exit_code;
+  const BackendConfig& backend_config = setup.backend;
+  const TrackingConfig& tracking = setup.tracking;
+  const std::unique_ptr<FrameSource>& source = setup.source;
+  const std::shared_ptr<const Vocabulary>& vocabulary = setup.vocabulary;
   long blackout_start = -1, blackout_count = 0;
   if (options.has("blackout")) {
     const std::string b = options.value("blackout");
@@ -280,23 +267,8 @@ int main(int argc, char** argv) {
   const long max_frames = std::stol(options.value("max-frames"));
   const bool tracking_covariance = options.has("tracking-covariance");
 
-  std::shared_ptr<const Vocabulary> vocabulary;
-  const auto t0 = std::chrono::steady_clock::now();
-  try {
-    if (options.has("vocabulary")) backend_config.vocabulary_file = options.value("vocabulary");
-    if (!backend_config.vocabulary_file.empty()) {
-      vocabulary = loadVocabulary(backend_config);
-    } else {
-      vocabulary = std::make_shared<const Vocabulary>(trainVocabularyOnSyntheticScene(
-          options.value("vocabulary-scene"), backend_config.vocabulary_branching,
-          backend_config.vocabulary_depth));
-    }
-  } catch (const VocabularyError& e) {
-    std::cerr << e.what() << "\n";
-    return kExitConfigError;
-  }
   std::printf("vocabulary: %d words, ready in %.1f s\n", vocabulary->numWords(),
-              std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+              setup.vocabulary_ready_s);
 
   VisualOdometry vo(tracking);
   Backend backend(backend_config, vocabulary);
