@@ -19,6 +19,7 @@
 #include <cstdio>
 #include <iostream>
 #include <memory>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -100,6 +101,17 @@ int main(int argc, char** argv) {
     std::cerr << "--source is required\n";
     return kExitUsage;
   }
+  long every = 1, max_frames = 0;
+  double exclude_s = 0.0, min_overlap = 0.0;
+  try {
+    every = std::max(1L, std::stol(options.value("every")));
+    max_frames = std::stol(options.value("max-frames"));
+    exclude_s = std::stod(options.value("exclude-s"));
+    min_overlap = std::stod(options.value("min-overlap"));
+  } catch (const std::logic_error&) {  // std::invalid_argument, std::out_of_range
+    std::cerr << "--every, --max-frames, --exclude-s and --min-overlap take numbers\n";
+    return kExitUsage;
+  }
   BackendEvalSetup setup;
   if (const int exit_code = openBackendEvalSetup(options, spec, setup)) return exit_code;
   const TrackingConfig& tracking = setup.tracking;
@@ -112,10 +124,6 @@ int main(int argc, char** argv) {
   }
   std::vector<double> truth_stamps;
   for (const StampedPose& p : *truth) truth_stamps.push_back(p.timestamp_s);
-  const long every = std::max(1L, std::stol(options.value("every")));
-  const long max_frames = std::stol(options.value("max-frames"));
-  const double exclude_s = std::stod(options.value("exclude-s"));
-  const double min_overlap = std::stod(options.value("min-overlap"));
 
   // Keyframes: features, BoW and true pose.
   const std::unique_ptr<FeatureExtractor> extractor = makeFeatureExtractor(tracking);
