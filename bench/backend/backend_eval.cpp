@@ -38,7 +38,6 @@
 #include "slamd/common/trajectory.hpp"
 #include "slamd/eval/metrics_report.hpp"
 #include "slamd/eval/trajectory_error.hpp"
-#include "slamd/sources/create_frame_source.hpp"
 #include "slamd/tracking/visual_odometry.hpp"
 
 using namespace slamd;

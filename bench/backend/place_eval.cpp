@@ -3,10 +3,10 @@
 // Every N-th frame of a sequence with ground truth becomes a keyframe: ORB features with depth
 // (tracking's extractor) and a BoW vector (the vocabulary under test). For each pair, the true
 // overlap is the share of the query's features with depth that the other keyframe's camera sees
-// at its ground-truth pose (in front, inside the image, within one and a half ORB scales of the
-// same distance). Each keyframe then queries the others, those within --exclude-s of it in time
-// left out, as loop detection and relocalisation do, and the report says where the BoW ranking
-// puts the keyframes that really see its place:
+// at its ground-truth pose (in front, inside the image, at a distance within the 1.44x that the
+// ORB pyramid's three default levels span). Each keyframe then queries the others, those within
+// --exclude-s of it in time left out, as loop detection and relocalisation do, and the report says
+// where the BoW ranking puts the keyframes that really see its place:
 //   - precision at 1 and at 5: the share of the best 1 / 5 scores whose true overlap reaches
 //     --min-overlap;
 //   - the rank of the keyframe with the largest true overlap (1 = first), median and mean;
@@ -64,11 +64,8 @@ double trueOverlap(const PlaceKeyframe& from, const PlaceKeyframe& to) {
     if (!(Y.z() > 0.0) || Y.z() > kMaxDepthRatio * X.z() || X.z() > kMaxDepthRatio * Y.z()) {
       continue;
     }
-    const double u = K.fx * Y.x() / Y.z() + K.cx;
-    const double v = K.fy * Y.y() / Y.z() + K.cy;
-    if (u >= kBorderPx && v >= kBorderPx && u < K.width - kBorderPx && v < K.height - kBorderPx) {
-      ++seen;
-    }
+    const Eigen::Vector2d pixel = K.project(Y);
+    if (K.contains(pixel.x(), pixel.y(), kBorderPx)) ++seen;
   }
   return with_depth > 0 ? static_cast<double>(seen) / with_depth : 0.0;
 }
