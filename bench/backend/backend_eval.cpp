@@ -276,6 +276,7 @@ int main(int argc, char** argv) {
   Trajectory frames_online;
   std::vector<double> loop_ms, optimisation_ms, local_ms, iterations, backend_cpu_ms;
   int optimisations = 0, full_optimisations = 0, lost_frames = 0, relocalization_attempts = 0;
+  int map_keyframe_reuses = 0;  // frames that took a map keyframe instead of making one
   SE3 T_world_odometry = SE3::Identity();
   long index = 0;
   while (max_frames <= 0 || index < max_frames) {
@@ -286,6 +287,7 @@ int main(int argc, char** argv) {
     const OdometryResult r = vo.processFrame(blank ? blankFrame(*read.frame) : read.frame);
     ++index;
     if (r.tracking_state == TrackingState::kLost) ++lost_frames;
+    if (r.stats.used_map_keyframe) ++map_keyframe_reuses;
     if (r.keyframe) {
       trajectory.addKeyframe(r.keyframe);
       const bool same_segment =
@@ -303,6 +305,7 @@ int main(int argc, char** argv) {
               .count();
       backend_cpu_ms.push_back(threadCpuMs() - cpu_start_ms);
       T_world_odometry = u.T_world_odometry;
+      vo.setMapKeyframes(backend.keyframesNear(r.keyframe->id));
       loop_ms.push_back(u.loop.time_ms);
       if (u.optimized) {
         ++optimisations;
@@ -364,6 +367,7 @@ int main(int argc, char** argv) {
   report.set("local_edges_count", backend.numLocalEdges());
   report.set("relocalizations_count", backend.numRelocalizations());
   report.set("relocalization_attempts_count", relocalization_attempts);
+  report.set("map_keyframe_reuses_count", map_keyframe_reuses);
   report.set("graph_nodes_count", static_cast<double>(backend.graph().numNodes()));
   report.set("graph_edges_count", static_cast<double>(backend.graph().numEdges()));
   report.setLatencySamples("optimization", optimisation_ms);
@@ -371,10 +375,11 @@ int main(int argc, char** argv) {
   report.setLatencySamples("local_edges", local_ms);
   std::printf(
       "%s: %ld frames (%d lost), %zu keyframes, %d segments joined by relocalisation "
-      "(%d attempts), %d loops, %d local edges; graph %zu nodes, %zu edges\n",
+      "(%d attempts), %d loops, %d local edges; graph %zu nodes, %zu edges; %d map keyframes "
+      "re-used\n",
       spec.c_str(), index, lost_frames, keyframes.size(), backend.numRelocalizations(),
       relocalization_attempts, backend.numLoops(), backend.numLocalEdges(),
-      backend.graph().numNodes(), backend.graph().numEdges());
+      backend.graph().numNodes(), backend.graph().numEdges(), map_keyframe_reuses);
   report.set("optimization_iterations_mean", mean(iterations));
   report.setLatencySamples("backend_cpu", backend_cpu_ms);
   std::printf("back end per keyframe (thread CPU): %.1f ms mean, %.1f ms p95, %.1f ms max\n",

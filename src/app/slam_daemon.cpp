@@ -92,6 +92,7 @@ struct DaemonSteps {
   /// Back-end step (producer) -> publish step and mapping step (consumers).
   SpscQueue<PoseCorrection> pose_corrections{64};
   SpscQueue<MapCorrection> map_corrections{64};
+  SpscQueue<MapKeyframesPacket> map_keyframes{16};
   VanishingPointChannel vanishing_points;
   PlaneSegmentationChannel plane_segmentation;
   std::optional<LcmFramePublisher> frame_publisher;  ///< used by the capture thread only
@@ -540,7 +541,10 @@ void SlamDaemon::Impl::buildSteps(LcmBus& bus, DaemonPublisher& publisher) {
   }
   s.capture.emplace(*source, static_cast<std::int64_t>(daemon.heartbeat_period_s * 1e9),
                     std::move(republish));
-  s.tracking.emplace(tracking_config);
+  // The back end's keyframes near the newest go back to tracking, which re-uses them instead of
+  // adding keyframes where the map already has the view.
+  const bool send_map_keyframes = backend && tracking_config.map_keyframes;
+  s.tracking.emplace(tracking_config, send_map_keyframes ? &s.map_keyframes : nullptr);
   if (session) {
     // The run's keyframes and segments continue the session's numbering.
     s.tracking->continueNumbering(backend->backend().nextKeyframeId(),
@@ -574,7 +578,8 @@ void SlamDaemon::Impl::buildSteps(LcmBus& bus, DaemonPublisher& publisher) {
   }
   if (backend) {
     s.backend.emplace(*backend, daemon.world_frame, publisher, &s.pose_corrections,
-                      mapper ? &s.map_corrections : nullptr);
+                      mapper ? &s.map_corrections : nullptr,
+                      send_map_keyframes ? &s.map_keyframes : nullptr);
     s.backend->watchMemoryPressure(&memory_pressure);
     s.backend->serveSnapshots(&snapshot_requests);
   }
@@ -754,6 +759,7 @@ void SlamDaemon::Impl::summarize(const std::vector<StageStats>& stats,
   summary.implausible_estimates = steps->tracking->implausibleEstimates();
   summary.prior_disagreements = steps->tracking->priorDisagreements();
   summary.dense_aligned_frames = steps->tracking->denseAlignedFrames();
+  summary.map_keyframe_reuses = steps->tracking->mapKeyframeReuses();
   summary.longest_loss_s = tally.longest_loss_s;
   summary.tracking_lost_at_end = tally.loss_start_utime.load() >= 0;
   summary.capture_gaps = tally.capture_gaps;
@@ -948,6 +954,7 @@ bool SlamDaemon::Impl::writeMetrics(const std::vector<StageStats>& stats) {
   json.key("implausible_estimates").value(static_cast<std::int64_t>(summary.implausible_estimates));
   json.key("prior_disagreements").value(static_cast<std::int64_t>(summary.prior_disagreements));
   json.key("dense_aligned_frames").value(static_cast<std::int64_t>(summary.dense_aligned_frames));
+  json.key("map_keyframe_reuses").value(static_cast<std::int64_t>(summary.map_keyframe_reuses));
   json.key("longest_loss_s").value(summary.longest_loss_s);
   json.key("tracking_lost_at_end").value(summary.tracking_lost_at_end);
   json.key("capture_gaps").value(static_cast<std::int64_t>(summary.capture_gaps));

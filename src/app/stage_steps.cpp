@@ -124,8 +124,14 @@ std::optional<TrackedPacket> TrackingStep::process(CapturePacket packet) {
   TrackedPacket out;
   out.frame = std::move(packet.frame);
   out.reset_epoch = packet.reset_epoch;
+  map_keyframes_.take(resetEpoch(), [this](MapKeyframesPacket&& near) {
+    odometry_.setMapKeyframes(std::move(near.keyframes));
+  });
   if (out.frame) {
     out.odometry = odometry_.processFrame(out.frame);
+    if (out.odometry->stats.used_map_keyframe) {
+      map_keyframe_reuses_.fetch_add(1, std::memory_order_relaxed);
+    }
     tracking_state_.store(static_cast<int>(out.odometry->tracking_state),
                           std::memory_order_relaxed);
     implausible_estimates_.fetch_add(
@@ -584,12 +590,14 @@ void MappingStep::coarsenFarMap(const SE3& T_world_camera) {
 
 BackendStep::BackendStep(BackendStage& backend, std::string world_frame, DaemonPublisher& publisher,
                          SpscQueue<PoseCorrection>* pose_corrections,
-                         SpscQueue<MapCorrection>* map_corrections)
+                         SpscQueue<MapCorrection>* map_corrections,
+                         SpscQueue<MapKeyframesPacket>* map_keyframes)
     : backend_(backend),
       world_frame_(std::move(world_frame)),
       publisher_(publisher),
       pose_corrections_(pose_corrections),
-      map_corrections_(map_corrections) {}
+      map_corrections_(map_corrections),
+      map_keyframes_(map_keyframes) {}
 
 BackendStepStats BackendStep::stats() const {
   return BackendStepStats{keyframes_.load(std::memory_order_relaxed),
@@ -617,6 +625,15 @@ void BackendStep::process(const EstimatedPacket& packet) {
   loops_.store(static_cast<std::int32_t>(stats.loops), std::memory_order_relaxed);
   relocalizations_.store(static_cast<std::int32_t>(stats.relocalizations),
                          std::memory_order_relaxed);
+  const std::int64_t newest_id = backend_.latestKeyframeId();
+  if (map_keyframes_ != nullptr && newest_id >= 0 && newest_id != map_keyframes_anchor_id_) {
+    map_keyframes_anchor_id_ = newest_id;
+    // Tracking takes them on every frame; should the queue be full, the set is dropped and the
+    // next keyframe's replaces it.
+    const bool queued = map_keyframes_->tryPush(
+        MapKeyframesPacket{backend_.backend().keyframesNear(newest_id), resetEpoch()});
+    if (!queued) SLAMD_LOG_DEBUG(kLog) << "map keyframes not handed to tracking: queue full";
+  }
   if (!correction) return;
   correction->trajectory.frame_id = world_frame_;
   publisher_.publishKeyframes(correction->trajectory);

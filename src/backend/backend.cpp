@@ -218,6 +218,40 @@ SE3 Backend::pose(std::int64_t keyframe_id) const {
   return graph_.pose(culled.anchor_id) * culled.T_anchor_keyframe;
 }
 
+MapKeyframes Backend::keyframesNear(std::int64_t anchor_id, double max_translation_m,
+                                    double max_rotation_deg, std::size_t max_count) const {
+  MapKeyframes near;
+  const auto anchor = keyframes_.find(anchor_id);
+  if (anchor == keyframes_.end() || !hasKeyframe(anchor_id)) return near;
+  near.anchor_id = anchor_id;
+  const std::int64_t map = segmentRoot(anchor->second.segment);
+  const SE3 T_anchor_world = pose(anchor_id).inverse();
+  struct Candidate {
+    double distance = 0.0;  ///< translation and rotation, each over its bound
+    std::int64_t id = -1;
+    SE3 T_anchor_keyframe;
+  };
+  std::vector<Candidate> candidates;
+  for (const std::int64_t id : graph_.nodeIds()) {
+    if (id == anchor_id || segmentRoot(keyframes_.at(id).segment) != map) continue;
+    const SE3 T_anchor_keyframe = T_anchor_world * graph_.pose(id);
+    const double translation_m = T_anchor_keyframe.translation().norm();
+    const double rotation_deg = rotationAngleRad(T_anchor_keyframe.linear()) * 180.0 / M_PI;
+    if (translation_m > max_translation_m || rotation_deg > max_rotation_deg) continue;
+    candidates.push_back({translation_m / max_translation_m + rotation_deg / max_rotation_deg, id,
+                          T_anchor_keyframe});
+  }
+  std::sort(candidates.begin(), candidates.end(),
+            [](const Candidate& a, const Candidate& b) { return a.distance < b.distance; });
+  for (const Candidate& candidate : candidates) {
+    if (near.members.size() >= max_count) break;
+    KeyframePtr keyframe = detector_.keyframe(candidate.id);
+    if (keyframe != nullptr)
+      near.members.push_back({std::move(keyframe), candidate.T_anchor_keyframe});
+  }
+  return near;
+}
+
 std::vector<std::int64_t> Backend::culledKeyframeIds() const {
   std::vector<std::int64_t> ids;
   ids.reserve(culled_.size());
@@ -500,7 +534,7 @@ BackendUpdate Backend::add(const KeyframePtr& keyframe, const Matrix6d* covarian
   changed = changed || (config_.optimize_every_keyframe && update.num_local_edges > 0);
 
   previous_ = keyframe;
-  update.loop = detector_.processKeyframe(*keyframe, local);
+  update.loop = detector_.processKeyframe(keyframe, local);
   const PoseGraphEdge loop_edge{update.loop.match_id, update.loop.query_id,
                                 update.loop.T_match_query, update.loop.information,
                                 EdgeKind::kLoop};
@@ -641,7 +675,7 @@ void Backend::restore(const BackendSnapshot& snapshot, bool fix_loaded_keyframes
     keyframes_[node.id] = records.at(node.id);
     headers_[node.id] = KeyframeHeader::of(*keyframe);
     segment_parent_.emplace(keyframe->segment, keyframe->segment);
-    detector_.insertKeyframe(*keyframe);
+    detector_.insertKeyframe(keyframe);
   }
   for (const PoseGraphEdge& edge : snapshot.edges) {
     if (!addEdge(edge)) {

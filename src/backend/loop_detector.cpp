@@ -95,7 +95,7 @@ bool LoopDetector::verify(const FeatureSet& query, const CameraIntrinsics& intri
                           const Entry& e, LoopDetection& detection, int min_inliers,
                           double min_sigma_m, double min_sigma_rad,
                           const SE3* T_match_query_prior) {
-  const FeatureSet& ref = e.features;
+  const FeatureSet& ref = e.features();
   // Descriptors of the features with depth, on both sides.
   const auto withDepth = [](const FeatureSet& features, std::vector<int>& rows) {
     cv::Mat descriptors;
@@ -231,8 +231,9 @@ bool LoopDetector::verify(const FeatureSet& query, const CameraIntrinsics& intri
   return true;
 }
 
-LoopDetection LoopDetector::processKeyframe(const Keyframe& keyframe,
+LoopDetection LoopDetector::processKeyframe(const KeyframePtr& keyframe_ptr,
                                             const std::vector<LoopDetection>& already_verified) {
+  const Keyframe& keyframe = *keyframe_ptr;
   const auto start = std::chrono::steady_clock::now();
   LoopDetection detection;
   detection.query_id = keyframe.id;
@@ -336,20 +337,21 @@ LoopDetection LoopDetector::processKeyframe(const Keyframe& keyframe,
     detection.num_inliers = best.num_inliers;
   }
 
-  store(keyframe, bow, path_length_m);
+  store(keyframe_ptr, bow, path_length_m);
   return done();
 }
 
-void LoopDetector::store(const Keyframe& keyframe, BowVector bow, double path_length_m) {
+void LoopDetector::store(const KeyframePtr& keyframe, BowVector bow, double path_length_m) {
   // A removed entry kept its BoW only while it was the latest (the score threshold above).
   if (!entries_.empty() && entries_.back().removed) entries_.back().bow = BowVector();
   const int entry = static_cast<int>(entries_.size());
   for (const auto& [word, weight] : bow) inverted_[word].emplace_back(entry, weight);
-  entries_.push_back({keyframe.id, keyframe.segment, keyframe.T_world_camera, path_length_m,
-                      std::move(bow), keyframe.features});
+  entries_.push_back({keyframe->id, keyframe->segment, keyframe->T_world_camera, path_length_m,
+                      std::move(bow), keyframe});
 }
 
-void LoopDetector::insertKeyframe(const Keyframe& keyframe) {
+void LoopDetector::insertKeyframe(const KeyframePtr& keyframe_ptr) {
+  const Keyframe& keyframe = *keyframe_ptr;
   groups_.clear();
   if (!hasBinaryDescriptors(keyframe.features) || vocabulary_ == nullptr || vocabulary_->empty()) {
     return;
@@ -360,19 +362,25 @@ void LoopDetector::insertKeyframe(const Keyframe& keyframe) {
                                                      entries_.back().T_world_camera.translation())
                                                         .norm();
   }
-  store(keyframe, vocabulary_->transform(keyframe.features.descriptors), path_length_m);
+  store(keyframe_ptr, vocabulary_->transform(keyframe.features.descriptors), path_length_m);
 }
 
 const FeatureSet* LoopDetector::features(std::int64_t id) const {
   const auto found = std::find_if(entries_.begin(), entries_.end(),
                                   [id](const Entry& e) { return e.id == id && !e.removed; });
-  return found != entries_.end() ? &found->features : nullptr;
+  return found != entries_.end() ? &found->features() : nullptr;
+}
+
+KeyframePtr LoopDetector::keyframe(std::int64_t id) const {
+  const auto found = std::find_if(entries_.begin(), entries_.end(),
+                                  [id](const Entry& e) { return e.id == id && !e.removed; });
+  return found != entries_.end() ? found->keyframe : nullptr;
 }
 
 std::unordered_map<std::int64_t, const FeatureSet*> LoopDetector::storedFeatures() const {
   std::unordered_map<std::int64_t, const FeatureSet*> features;
   for (const Entry& entry : entries_) {
-    if (!entry.removed) features[entry.id] = &entry.features;
+    if (!entry.removed) features[entry.id] = &entry.features();
   }
   return features;
 }
@@ -392,7 +400,7 @@ bool LoopDetector::removeKeyframe(std::int64_t id) {
         postings.end());
     if (postings.empty()) inverted_.erase(it);
   }
-  found->features = FeatureSet();
+  found->keyframe = nullptr;
   found->removed = true;
   // The latest entry's BoW still sets the next keyframe's score threshold.
   if (entry + 1 != static_cast<int>(entries_.size())) found->bow = BowVector();

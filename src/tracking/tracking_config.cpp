@@ -133,6 +133,9 @@ const ConfigSchema<TrackingConfig>& TrackingConfig::schema() {
           .number("keyframe_window", &C::keyframe_window, 1, 1000, "keyframes",
                   "recent keyframes kept (about 3 MB each at 640x480); a due keyframe re-uses a "
                   "recent one near the current pose if it tracks well (1 = never re-use)")
+          .flag("map_keyframes", &C::map_keyframes,
+                "a due keyframe also tries the back end's keyframes near the current pose (the "
+                "map's view of the place, kept after culling) before a new one is made")
           .number("max_predicted_frames", &C::max_predicted_frames, 0, 1000, "frames",
                   "consecutive failed frames bridged by constant-velocity prediction before LOST")
           .number("relocalization_keyframes", &C::relocalization_keyframes, 0, 1000, "keyframes",

@@ -210,6 +210,7 @@ void VisualOdometry::reset() {
   state_ = TrackingState::kNotInitialized;
   keyframe_.reset();
   recent_keyframes_.clear();
+  map_keyframes_ = MapKeyframes();
   local_map_.clear();
   prev_features_.reset();
   prev_tracked_ = false;
@@ -1007,48 +1008,102 @@ bool VisualOdometry::needsNewKeyframe(const TrackAttempt& attempt, const Keyfram
 }
 
 bool VisualOdometry::reuseRecentKeyframe(const CurrentFrame& curr, TrackAttempt& attempt,
-                                         SE3& T_world_curr, OdometryResult& res) {
-  // Before making a keyframe, try the recent keyframes near the current pose: re-using one
-  // (the camera came back) measures against it directly instead of chaining more drift.
-  std::vector<std::pair<double, KeyframePtr>> candidates;
-  for (const KeyframePtr& kf : recent_keyframes_) {
-    if (kf == keyframe_) continue;
-    const SE3 T_kf_curr = kf->T_world_camera.inverse() * T_world_curr;
+                                         bool keyframe_was_reference, SE3& T_world_curr,
+                                         OdometryResult& res) {
+  // Before making a keyframe, try the keyframes near the current pose: re-using one (the camera
+  // came back) measures against it directly instead of chaining more drift, and adds nothing.
+  // Tracking's recent keyframes are where it put them; the map's are placed through the anchor,
+  // a recent keyframe of tracking's, at their optimised pose relative to it.
+  struct Candidate {
+    double distance = 0.0;
+    KeyframePtr kf;
+    SE3 T_world_kf;
+    bool from_map = false;
+  };
+  std::vector<Candidate> candidates;
+  const auto consider = [&](const KeyframePtr& kf, const SE3& T_world_kf, bool from_map) {
+    const SE3 T_kf_curr = T_world_kf.inverse() * T_world_curr;
     const double translation_m = T_kf_curr.translation().norm();
     const double rotation_deg = rotationAngleRad(T_kf_curr.linear()) * 180.0 / M_PI;
     if (translation_m > 0.5 * config_.keyframe_max_translation_m ||
         rotation_deg > 0.5 * config_.keyframe_max_rotation_deg) {
-      continue;
+      return;
     }
-    candidates.emplace_back(translation_m / config_.keyframe_max_translation_m +
-                                rotation_deg / config_.keyframe_max_rotation_deg,
-                            kf);
+    candidates.push_back({translation_m / config_.keyframe_max_translation_m +
+                              rotation_deg / config_.keyframe_max_rotation_deg,
+                          kf, T_world_kf, from_map});
+  };
+  for (const KeyframePtr& kf : recent_keyframes_) {
+    if (kf != keyframe_) consider(kf, kf->T_world_camera, false);
+  }
+  if (const Keyframe* anchor = recentKeyframe(map_keyframes_.anchor_id)) {
+    for (const MapKeyframes::Member& member : map_keyframes_.members) {
+      if (recentKeyframe(member.keyframe->id) != nullptr) continue;
+      consider(member.keyframe, anchor->T_world_camera * member.T_anchor_keyframe, true);
+    }
   }
   std::sort(candidates.begin(), candidates.end(),
-            [](const auto& a, const auto& b) { return a.first < b.first; });
+            [](const Candidate& a, const Candidate& b) { return a.distance < b.distance; });
   for (std::size_t k = 0; k < candidates.size() && k < 2; ++k) {
-    const KeyframePtr& kf = candidates[k].second;
+    const Candidate& candidate = candidates[k];
     const TrackAttempt reuse =
-        track(kf->features, kf->T_world_camera.inverse() * T_world_curr, true, curr);
+        track(candidate.kf->features, candidate.T_world_kf.inverse() * T_world_curr, true, curr);
     res.stats.time_matching_ms += reuse.time_matching_ms;
     res.stats.time_motion_ms += reuse.time_motion_ms;
-    if (reuse.status == OdometryStatus::kOk &&
-        !needsNewKeyframe(reuse, *kf, curr.features->num_with_depth)) {
-      keyframe_ = kf;
-      attempt = reuse;
-      T_world_curr = normalizedSE3(kf->T_world_camera * reuse.T_ref_curr);
-      res.reference_keyframe_id = kf->id;
-      res.ref_utime = kf->utime;
-      res.stats.num_matches = reuse.num_matches;
-      res.stats.num_inliers = reuse.num_inliers;
-      res.stats.reprojection_error_px = reuse.rms_px;
-      res.T_ref_curr = reuse.T_ref_curr;
-      res.covariance_ref_curr = reuse.covariance;
-      res.covariance = reuse.covariance;
-      return true;
+    if (reuse.status != OdometryStatus::kOk ||
+        needsNewKeyframe(reuse, *candidate.kf, curr.features->num_with_depth)) {
+      continue;
     }
+    if (candidate.from_map) {
+      // The map's keyframe joins tracking's window at the pose the map gives it relative to the
+      // anchor, sharing the landmarks of the current features it matched. The pose then follows
+      // the map: it moves by the drift the back end corrected between the anchor and the
+      // keyframe, as it moves to a recent keyframe's reference when one is re-used.
+      auto placed = std::make_shared<Keyframe>(*candidate.kf);
+      placed->T_world_camera = candidate.T_world_kf;
+      const std::vector<std::int64_t> curr_landmarks = keyframe_was_reference
+                                                           ? landmarksOfCurrent(attempt, *keyframe_)
+                                                           : std::vector<std::int64_t>();
+      std::vector<std::int64_t> placed_landmarks(placed->features.size(), -1);
+      for (std::size_t m = 0; m < reuse.matches.size(); ++m) {
+        const Correspondence& c = reuse.matches[m];
+        if (!reuse.inliers[m] || c.ref_index < 0 || c.curr_index < 0 ||
+            static_cast<std::size_t>(c.curr_index) >= curr_landmarks.size()) {
+          continue;
+        }
+        placed_landmarks[static_cast<std::size_t>(c.ref_index)] =
+            curr_landmarks[static_cast<std::size_t>(c.curr_index)];
+      }
+      addToWindow(placed, placed_landmarks);
+      keyframe_ = placed;
+      res.stats.used_map_keyframe = true;
+    } else {
+      keyframe_ = candidate.kf;
+    }
+    T_world_curr = normalizedSE3(candidate.T_world_kf * reuse.T_ref_curr);
+    attempt = reuse;
+    res.reference_keyframe_id = keyframe_->id;
+    res.ref_utime = keyframe_->utime;
+    res.stats.num_matches = reuse.num_matches;
+    res.stats.num_inliers = reuse.num_inliers;
+    res.stats.reprojection_error_px = reuse.rms_px;
+    res.T_ref_curr = reuse.T_ref_curr;
+    res.covariance_ref_curr = reuse.covariance;
+    res.covariance = reuse.covariance;
+    return true;
   }
   return false;
+}
+
+const Keyframe* VisualOdometry::recentKeyframe(std::int64_t id) const {
+  for (const KeyframePtr& kf : recent_keyframes_) {
+    if (kf->id == id) return kf.get();
+  }
+  return nullptr;
+}
+
+void VisualOdometry::setMapKeyframes(MapKeyframes map_keyframes) {
+  if (config_.map_keyframes) map_keyframes_ = std::move(map_keyframes);
 }
 
 void VisualOdometry::refineInLocalWindow(const CurrentFrame& curr, TrackAttempt& attempt,
@@ -1073,15 +1128,26 @@ void VisualOdometry::refineInLocalWindow(const CurrentFrame& curr, TrackAttempt&
 }
 
 void VisualOdometry::associateWithKeyframe(const TrackAttempt& attempt, const Keyframe& kf) {
-  if (!local_map_.hasKeyframe(kf.id)) return;
+  const std::vector<std::int64_t> landmarks = landmarksOfCurrent(attempt, kf);
+  if (curr_landmarks_.size() < landmarks.size()) curr_landmarks_.resize(landmarks.size(), -1);
+  for (std::size_t i = 0; i < landmarks.size(); ++i) {
+    if (landmarks[i] >= 0) curr_landmarks_[i] = landmarks[i];
+  }
+}
+
+std::vector<std::int64_t> VisualOdometry::landmarksOfCurrent(const TrackAttempt& attempt,
+                                                             const Keyframe& kf) const {
+  std::vector<std::int64_t> curr_landmarks;
+  if (!local_map_.hasKeyframe(kf.id)) return curr_landmarks;
   const std::vector<std::int64_t>& landmarks = local_map_.landmarksOf(kf.id);
   for (std::size_t k = 0; k < attempt.matches.size(); ++k) {
     const Correspondence& c = attempt.matches[k];
     if (!attempt.inliers[k] || c.ref_index < 0 || c.curr_index < 0) continue;
     const std::size_t curr_index = static_cast<std::size_t>(c.curr_index);
-    if (curr_index >= curr_landmarks_.size()) curr_landmarks_.resize(curr_index + 1, -1);
-    curr_landmarks_[curr_index] = landmarks[static_cast<std::size_t>(c.ref_index)];
+    if (curr_index >= curr_landmarks.size()) curr_landmarks.resize(curr_index + 1, -1);
+    curr_landmarks[curr_index] = landmarks[static_cast<std::size_t>(c.ref_index)];
   }
+  return curr_landmarks;
 }
 
 void VisualOdometry::collectLocalMapGroups(bool keyframe_is_reference) {
@@ -1278,8 +1344,13 @@ void VisualOdometry::addKeyframe(const CurrentFrame& curr, const RgbdFrame& fram
   keyframe_ = makeKeyframe(curr, frame, frame_ptr, T_world_curr);
   res.is_keyframe = true;
   res.keyframe = keyframe_;
-  recent_keyframes_.push_back(keyframe_);
-  local_map_.addKeyframe(keyframe_, curr_landmarks_);
+  addToWindow(keyframe_, curr_landmarks_);
+}
+
+void VisualOdometry::addToWindow(const KeyframePtr& keyframe,
+                                 const std::vector<std::int64_t>& feature_landmarks) {
+  recent_keyframes_.push_back(keyframe);
+  local_map_.addKeyframe(keyframe, feature_landmarks);
   while (static_cast<int>(recent_keyframes_.size()) > config_.keyframe_window) {
     local_map_.removeKeyframe(recent_keyframes_.front()->id);
     recent_keyframes_.pop_front();
@@ -1355,7 +1426,7 @@ OdometryResult VisualOdometry::process(const RgbdFrame& frame, const RgbdFramePt
                       needsNewKeyframe(attempt, *keyframe_, curr.features->num_with_depth);
   bool keyframe_is_reference = !measured.from_previous;
   if (new_keyframe && config_.keyframe_window > 1 &&
-      reuseRecentKeyframe(curr, attempt, T_world_curr, res)) {
+      reuseRecentKeyframe(curr, attempt, !measured.from_previous, T_world_curr, res)) {
     new_keyframe = false;
     keyframe_is_reference = true;
   }

@@ -106,7 +106,7 @@ DetectionRun detectLoops(const RenderedKeyframes& world) {
   LoopDetector detector(BackendConfig(), roomVocabulary());
   DetectionRun run;
   for (const KeyframePtr& kf : world.keyframes) {
-    const LoopDetection d = detector.processKeyframe(*kf);
+    const LoopDetection d = detector.processKeyframe(kf);
     ++run.keyframes;
     run.max_time_ms = std::max(run.max_time_ms, d.time_ms);
     run.total_time_ms += d.time_ms;
@@ -469,8 +469,8 @@ TEST(Backend, LocalMatchesThatDisagreeWithTheGraphAreRejected) {
 
 TEST(LoopDetector, RejectsNonBinaryDescriptors) {
   LoopDetector detector(BackendConfig(), roomVocabulary());
-  Keyframe keyframe;
-  keyframe.features.descriptors = cv::Mat(10, 128, CV_32F, cv::Scalar(0));
+  auto keyframe = std::make_shared<Keyframe>();
+  keyframe->features.descriptors = cv::Mat(10, 128, CV_32F, cv::Scalar(0));
   EXPECT_EQ(detector.processKeyframe(keyframe).status, LoopStatus::kUnsupportedDescriptors);
   EXPECT_EQ(detector.size(), 0u);
 }
@@ -615,6 +615,60 @@ TEST(Backend, KeptKeyframesCullTheEarlierOnesTheyMakeRedundant) {
   EXPECT_LT(both.rms_error_m, newest_only.rms_error_m + 0.01);
 }
 
+// What tracking gets back from the back end (VisualOdometry::setMapKeyframes): the kept keyframes
+// near one keyframe, culled or not, each at its optimised pose relative to it, nearest first.
+TEST(Backend, KeyframesNearAKeyframeAreTheKeptOnesWithinReachAtTheirOptimisedPoses) {
+  const RenderedKeyframes lap = renderKeyframes("room", 5, 40);
+  const PingPong run = pingPong(lap, 2);
+  Backend backend(BackendConfig(), roomVocabulary());
+  std::int64_t culled_anchor = -1;
+  for (const KeyframePtr& keyframe : run.keyframes) {
+    if (backend.addKeyframe(keyframe).culled) culled_anchor = keyframe->id;
+  }
+  ASSERT_GE(culled_anchor, 0) << "the second lap culls some keyframe";
+  const double max_translation_m = 1.0;
+  const double max_rotation_deg = 60.0;
+  for (const std::int64_t anchor : {run.keyframes.back()->id, culled_anchor}) {
+    SCOPED_TRACE(anchor);
+    const MapKeyframes near =
+        backend.keyframesNear(anchor, max_translation_m, max_rotation_deg, 1000);
+    EXPECT_EQ(near.anchor_id, anchor);
+    const SE3 T_anchor_world = backend.pose(anchor).inverse();
+    std::size_t within_reach = 0;
+    for (const std::int64_t id : backend.graph().nodeIds()) {
+      const SE3 T = T_anchor_world * backend.pose(id);
+      if (id != anchor && T.translation().norm() <= max_translation_m &&
+          rotationAngleRad(T.linear()) * 180.0 / M_PI <= max_rotation_deg) {
+        ++within_reach;
+      }
+    }
+    ASSERT_GT(within_reach, 3u);
+    EXPECT_EQ(near.members.size(), within_reach) << "every kept keyframe in reach";
+    double previous_distance = 0.0;
+    for (const MapKeyframes::Member& member : near.members) {
+      ASSERT_NE(member.keyframe, nullptr);
+      EXPECT_NE(member.keyframe->id, anchor);
+      EXPECT_TRUE(backend.graph().hasNode(member.keyframe->id)) << "culled ones are not offered";
+      const SE3 expected = T_anchor_world * backend.pose(member.keyframe->id);
+      EXPECT_LT((member.T_anchor_keyframe.translation() - expected.translation()).norm(), 1e-12);
+      const double distance =
+          member.T_anchor_keyframe.translation().norm() / max_translation_m +
+          rotationAngleRad(member.T_anchor_keyframe.linear()) * 180.0 / M_PI / max_rotation_deg;
+      EXPECT_GE(distance, previous_distance - 1e-12) << "nearest first";
+      previous_distance = distance;
+    }
+    const MapKeyframes nearest =
+        backend.keyframesNear(anchor, max_translation_m, max_rotation_deg, 3);
+    ASSERT_EQ(nearest.members.size(), 3u);
+    for (std::size_t k = 0; k < 3; ++k) {
+      EXPECT_EQ(nearest.members[k].keyframe->id, near.members[k].keyframe->id);
+    }
+  }
+  const MapKeyframes unknown = backend.keyframesNear(123456, 1.0, 60.0, 10);
+  EXPECT_EQ(unknown.anchor_id, -1);
+  EXPECT_TRUE(unknown.members.empty());
+}
+
 // Culling an earlier keyframe keeps the back end whole: keyframes culled into it follow it to
 // its anchor, every culled keyframe keeps a pose, and a snapshot restores.
 TEST(Backend, AfterEarlierKeyframesAreCulledEveryAnchorIsInTheGraphAndASnapshotRestores) {
@@ -688,7 +742,7 @@ TEST(Backend, UnderMemoryPressureFewerKeyframesAreKept) {
 TEST(LoopDetector, ARemovedKeyframeIsNeverReturnedAgain) {
   const RenderedKeyframes& world = ringKeyframes();
   LoopDetector detector(BackendConfig(), roomVocabulary());
-  for (std::size_t k = 0; k < 10; ++k) detector.processKeyframe(*world.keyframes[k]);
+  for (std::size_t k = 0; k < 10; ++k) detector.processKeyframe(world.keyframes[k]);
   const Keyframe& probe = *world.keyframes[5];
   const LoopDetection before = detector.query(probe.features, probe.intrinsics);
   ASSERT_EQ(before.status, LoopStatus::kLoopFound);
@@ -704,7 +758,7 @@ TEST(LoopDetector, ARemovedKeyframeIsNeverReturnedAgain) {
       detector.matchLocal(probe, [](std::int64_t, std::int64_t) { return true; });
   for (const LoopDetection& d : local) EXPECT_NE(d.match_id, probe.id);
   // Keyframes added after a removal are found as before.
-  detector.processKeyframe(*world.keyframes[10]);
+  detector.processKeyframe(world.keyframes[10]);
   EXPECT_EQ(detector.query(world.keyframes[10]->features, world.keyframes[10]->intrinsics).match_id,
             world.keyframes[10]->id);
 }

@@ -1,10 +1,12 @@
 #include "slamd/tracking/visual_odometry.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <limits>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -238,6 +240,76 @@ TEST(VisualOdometry, AfterALossAFrameThatSeesARecentKeyframeAgainIsRelocalisedIn
   EXPECT_EQ(r.tracking_state, TrackingState::kOk);
   EXPECT_TRUE(r.is_keyframe);
   EXPECT_EQ(r.segment, 1);
+}
+
+// The camera goes 1.2 m along x and comes back. Tracking keeps only its last 2 keyframes, so on
+// the way back the keyframes of the start have left its window; the map still has them (here:
+// every keyframe made, at its true pose, as a back end that has optimised well holds them).
+struct OutAndBack {
+  int keyframes_on_the_way_back = 0;
+  int map_keyframe_reuses = 0;
+  double max_error_m = 0.0;
+};
+
+OutAndBack runOutAndBack(bool map_keyframes) {
+  TrackingConfig config;
+  config.keyframe_window = 2;
+  config.map_keyframes = map_keyframes;
+  VisualOdometry vo(config);
+  const test::TexturedBox box({-2, -1.5, -1}, {2, 1.5, 3}, 42);
+  const int half = 60;
+  const auto truth = [half](int i) {
+    SE3 T = SE3::Identity();
+    T.translation().x() = 0.02 * (i <= half ? i : 2 * half - i);
+    return T;
+  };
+  std::vector<std::pair<KeyframePtr, SE3>> made;  // with its true pose
+  OutAndBack out;
+  for (int i = 0; i <= 2 * half; ++i) {
+    const SE3 T_true = truth(i);
+    RgbdFrame frame = box.render(T_true, test::fr1Camera());
+    frame.utime = 1'000'000 + i * 33'333;
+    frame.sequence = i;
+    const OdometryResult r = vo.processFrame(frame);
+    EXPECT_EQ(r.status, OdometryStatus::kOk) << i;
+    out.max_error_m =
+        std::max(out.max_error_m, (r.T_world_camera.translation() - T_true.translation()).norm());
+    if (r.stats.used_map_keyframe) {
+      ++out.map_keyframe_reuses;
+      EXPECT_FALSE(r.is_keyframe);
+      const bool known = std::any_of(made.begin(), made.end(), [&](const auto& m) {
+        return m.first->id == r.reference_keyframe_id;
+      });
+      EXPECT_TRUE(known) << "frame " << i << " measured against keyframe "
+                         << r.reference_keyframe_id;
+    }
+    if (!r.is_keyframe) continue;
+    if (i > half) ++out.keyframes_on_the_way_back;
+    MapKeyframes map;
+    map.anchor_id = r.keyframe->id;
+    for (const auto& [kf, T_world_kf] : made) {
+      map.members.push_back({kf, T_true.inverse() * T_world_kf});
+    }
+    made.emplace_back(r.keyframe, T_true);
+    vo.setMapKeyframes(std::move(map));
+  }
+  return out;
+}
+
+TEST(VisualOdometry, ComingBackWhereOnlyTheMapHoldsTheViewReusesTheMapsKeyframes) {
+  const OutAndBack with_map = runOutAndBack(true);
+  const OutAndBack without = runOutAndBack(false);
+  std::printf(
+      "out and back: %d keyframes on the way back with the map's (%d frames re-used one), "
+      "%d without; max error %.4f / %.4f m\n",
+      with_map.keyframes_on_the_way_back, with_map.map_keyframe_reuses,
+      without.keyframes_on_the_way_back, with_map.max_error_m, without.max_error_m);
+  ASSERT_GE(without.keyframes_on_the_way_back, 2) << "the window alone does not cover the way back";
+  EXPECT_EQ(without.map_keyframe_reuses, 0) << "tracking.map_keyframes off ignores the map";
+  EXPECT_GE(with_map.map_keyframe_reuses, 1);
+  EXPECT_LT(with_map.keyframes_on_the_way_back, without.keyframes_on_the_way_back);
+  EXPECT_LT(with_map.max_error_m, 0.005);
+  EXPECT_LT(without.max_error_m, 0.005);
 }
 
 TEST(VisualOdometry, DenseAlignmentMeasuresFramesFeaturesCannot) {

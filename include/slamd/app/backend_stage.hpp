@@ -101,6 +101,8 @@ class BackendStage {
 
   const BackendStageStats& stats() const { return stats_; }
   const Backend& backend() const { return *backend_; }
+  /// The newest keyframe this run added (culled or not), -1 before the first.
+  std::int64_t latestKeyframeId() const { return latest_keyframe_id_; }
 
  private:
   /// The keyframe part of process(): a correction when this frame's keyframe re-optimised.

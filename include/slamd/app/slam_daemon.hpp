@@ -73,6 +73,9 @@ struct DaemonSummary {
   std::uint64_t prior_disagreements = 0;  ///< estimates rejected by the motion prior's gate
   /// Poses measured by dense alignment where features failed (part of poses_tracked).
   std::uint64_t dense_aligned_frames = 0;
+  /// Frames that took one of the back end's keyframes as reference where tracking would have
+  /// made a keyframe (tracking.map_keyframes).
+  std::uint64_t map_keyframe_reuses = 0;
   double longest_loss_s = 0.0;        ///< longest run of predicted or lost poses, frame time
   bool tracking_lost_at_end = false;  ///< the last published pose was not measured
   // Gaps in the camera's frames (more than 0.5 s of capture time between two poses: a camera

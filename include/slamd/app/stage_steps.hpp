@@ -176,13 +176,25 @@ class CaptureStep {
 
 // --- tracking --------------------------------------------------------------------------------
 
+/// The back end's keyframes near its newest one, for tracking (VisualOdometry::setMapKeyframes).
+struct MapKeyframesPacket {
+  MapKeyframes keyframes;
+  std::uint64_t reset_epoch = 0;
+};
+
 /// Visual odometry on every frame.
 class TrackingStep : public StepBase {
  public:
-  explicit TrackingStep(const TrackingConfig& config) : odometry_(config) {}
+  /// `map_keyframes`: the back end's keyframes near the newest (null without a back end).
+  explicit TrackingStep(const TrackingConfig& config,
+                        SpscQueue<MapKeyframesPacket>* map_keyframes = nullptr)
+      : odometry_(config), map_keyframes_(map_keyframes) {}
 
   std::optional<TrackedPacket> process(CapturePacket packet);
-  void reset() override { odometry_.reset(); }
+  void reset() override {
+    odometry_.reset();
+    map_keyframes_.clear();
+  }
   /// VisualOdometry::continueNumbering (before the pipeline starts).
   void continueNumbering(std::int64_t next_keyframe_id, std::int64_t next_segment) {
     odometry_.continueNumbering(next_keyframe_id, next_segment);
@@ -203,13 +215,20 @@ class TrackingStep : public StepBase {
   std::uint64_t denseAlignedFrames() const {
     return dense_aligned_frames_.load(std::memory_order_relaxed);
   }
+  /// Frames that took one of the map's keyframes as reference instead of making a keyframe
+  /// (any thread).
+  std::uint64_t mapKeyframeReuses() const {
+    return map_keyframe_reuses_.load(std::memory_order_relaxed);
+  }
 
  private:
   VisualOdometry odometry_;
+  EpochInbox<MapKeyframesPacket> map_keyframes_;
   std::atomic<int> tracking_state_{static_cast<int>(TrackingState::kNotInitialized)};
   std::atomic<std::uint64_t> implausible_estimates_{0};
   std::atomic<std::uint64_t> prior_disagreements_{0};
   std::atomic<std::uint64_t> dense_aligned_frames_{0};
+  std::atomic<std::uint64_t> map_keyframe_reuses_{0};
 };
 
 // --- steps parallel to tracking (vanishing points, plane segmentation) --------------------------
@@ -565,13 +584,18 @@ struct BackendStepStats {
 /// publish and mapping steps and publishes the optimised keyframes.
 class BackendStep : public StepBase {
  public:
-  /// `map_corrections`: null when mapping is off.
+  /// `map_corrections`: null when mapping is off. `map_keyframes`: to tracking, after each
+  /// keyframe (null: not sent).
   BackendStep(BackendStage& backend, std::string world_frame, DaemonPublisher& publisher,
               SpscQueue<PoseCorrection>* pose_corrections,
-              SpscQueue<MapCorrection>* map_corrections);
+              SpscQueue<MapCorrection>* map_corrections,
+              SpscQueue<MapKeyframesPacket>* map_keyframes = nullptr);
 
   void process(const EstimatedPacket& packet);
-  void reset() override { backend_.reset(); }
+  void reset() override {
+    backend_.reset();
+    map_keyframes_anchor_id_ = -1;
+  }
   /// Snapshot requests from the control loop, served on every packet (heartbeats too).
   void serveSnapshots(SpscQueue<SnapshotRequest>* requests) { snapshot_requests_ = requests; }
   /// Counts for the status message (any thread).
@@ -587,6 +611,8 @@ class BackendStep : public StepBase {
   DaemonPublisher& publisher_;
   SpscQueue<PoseCorrection>* pose_corrections_;
   SpscQueue<MapCorrection>* map_corrections_;
+  SpscQueue<MapKeyframesPacket>* map_keyframes_;
+  std::int64_t map_keyframes_anchor_id_ = -1;  ///< the newest keyframe they were sent for
   SpscQueue<SnapshotRequest>* snapshot_requests_ = nullptr;
   std::atomic<std::int32_t> keyframes_{0};
   std::atomic<std::int32_t> loops_{0};

@@ -182,6 +182,18 @@ class Backend {
   /// culled keyframe's is the pose of the keyframe it was merged into, composed with the offset
   /// measured between them. Throws std::out_of_range for an id never added.
   SE3 pose(std::int64_t keyframe_id) const;
+  /// The keyframes in the graph that the loop detector keeps (those with binary descriptors)
+  /// within max_translation_m and max_rotation_deg of keyframe anchor_id (culled or not; itself
+  /// excluded), in the map its segment belongs to, nearest first, at most max_count: for
+  /// tracking to measure against (MapKeyframes). Empty when the anchor was never added.
+  MapKeyframes keyframesNear(std::int64_t anchor_id, double max_translation_m,
+                             double max_rotation_deg, std::size_t max_count) const;
+  /// The same with the reach tracking needs: it tries keyframes within half its keyframe bounds
+  /// (0.25 m, 15 degrees by default) of a pose that is some keyframes past the anchor by the time
+  /// the set arrives.
+  MapKeyframes keyframesNear(std::int64_t anchor_id) const {
+    return keyframesNear(anchor_id, 1.0, 60.0, 64);
+  }
   /// The keyframe was added (culled or not).
   bool hasKeyframe(std::int64_t keyframe_id) const {
     return graph_.hasNode(keyframe_id) || culled_.count(keyframe_id) != 0;

@@ -30,7 +30,10 @@ namespace slamd {
 class KeyframeAnchoredTrajectory {
  public:
   void addKeyframe(const KeyframePtr& keyframe);
-  /// Records the frame of one processFrame() result (after addKeyframe for its keyframe).
+  /// Records the frame of one processFrame() result (after addKeyframe for its keyframe). A
+  /// frame that took one of the map's keyframes as reference (OdometryStats::used_map_keyframe)
+  /// places that keyframe anew: it and the frames measured against it after it are stored
+  /// against the pose the frame's measurement gives it, not the pose it was made at.
   void addFrame(const OdometryResult& result) { addFrame(result, result.T_world_camera); }
   /// The same with the frame's pose from another estimator (the filter's), in the frame its
   /// keyframes' poses were given in.
@@ -45,17 +48,23 @@ class KeyframeAnchoredTrajectory {
  private:
   struct Frame {
     double t_s = 0.0;
-    std::int64_t keyframe_id = -1;
+    std::size_t anchor = 0;                ///< index into anchors_
     SE3 T_world_camera = SE3::Identity();  ///< odometry
   };
   /// What a frame's pose is stored against: only the keyframe's odometry pose and segment (the
-  /// keyframe itself, and its images, are not kept).
+  /// keyframe itself, and its images, are not kept). A keyframe placed anew gets another.
   struct Anchor {
+    std::int64_t keyframe_id = -1;
     std::int64_t segment = 0;
     SE3 T_world_camera = SE3::Identity();  ///< odometry
   };
-  std::unordered_map<std::int64_t, Anchor> keyframes_;
-  std::int64_t latest_id_ = -1;
+  /// Appends an anchor; it becomes the keyframe's current one.
+  std::size_t addAnchor(std::int64_t keyframe_id, std::int64_t segment, const SE3& T_world_camera);
+
+  std::vector<Anchor> anchors_;
+  std::unordered_map<std::int64_t, std::size_t> anchor_of_keyframe_;  ///< the current one
+  std::size_t latest_anchor_ = 0;
+  bool have_keyframe_ = false;
   std::vector<Frame> frames_;
 };
 

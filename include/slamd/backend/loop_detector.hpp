@@ -74,7 +74,7 @@ class LoopDetector {
   /// `already_verified`: matches of this keyframe the caller verified itself (matchLocal()); a
   /// candidate among them with at least backend.loop_min_inliers is not matched again (its
   /// detection is then the caller's, with the caller's information matrix).
-  LoopDetection processKeyframe(const Keyframe& keyframe,
+  LoopDetection processKeyframe(const KeyframePtr& keyframe,
                                 const std::vector<LoopDetection>& already_verified = {});
 
   /// Best verified match of a frame's features among all stored keyframes (relocalisation):
@@ -106,7 +106,7 @@ class LoopDetector {
 
   /// Stores a keyframe without searching (a keyframe of a loaded session): later searches can
   /// return it. A keyframe without binary descriptors, or an empty vocabulary, stores nothing.
-  void insertKeyframe(const Keyframe& keyframe);
+  void insertKeyframe(const KeyframePtr& keyframe);
 
   /// Forgets a stored keyframe (culled by the back end): no search returns it any more and its
   /// features are released. Its place in the order of keyframes stays (the recent-keyframe
@@ -115,6 +115,8 @@ class LoopDetector {
 
   /// The features of a searchable stored keyframe (valid until the detector changes), or null.
   const FeatureSet* features(std::int64_t id) const;
+  /// A searchable stored keyframe (as it was given), or null.
+  KeyframePtr keyframe(std::int64_t id) const;
   /// The features of every searchable stored keyframe, by id (pointers into the detector, valid
   /// until it changes).
   std::unordered_map<std::int64_t, const FeatureSet*> storedFeatures() const;
@@ -131,8 +133,9 @@ class LoopDetector {
     SE3 T_world_camera = SE3::Identity();  ///< odometry pose when added
     double path_length_m = 0.0;            ///< distance travelled from the first keyframe
     BowVector bow;
-    FeatureSet features;   ///< shares the descriptor and image buffers with the keyframe
-    bool removed = false;  ///< removeKeyframe(): out of the index, features released
+    KeyframePtr keyframe;  ///< the keyframe as given; null once removed
+    bool removed = false;  ///< removeKeyframe(): out of the index, keyframe released
+    const FeatureSet& features() const { return keyframe->features; }
   };
   struct Candidate {
     int entry = -1;
@@ -144,7 +147,7 @@ class LoopDetector {
   };
 
   /// Adds an entry and its postings.
-  void store(const Keyframe& keyframe, BowVector bow, double path_length_m);
+  void store(const KeyframePtr& keyframe, BowVector bow, double path_length_m);
   std::vector<Candidate> retrieve(const BowVector& bow, std::size_t num_searchable,
                                   double min_score,
                                   const KeyframeFilter& allowed = KeyframeFilter()) const;

@@ -4,6 +4,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <memory>
+#include <vector>
 
 #include "slamd/common/camera_intrinsics.hpp"
 #include "slamd/common/rgbd_frame.hpp"
@@ -25,6 +26,20 @@ struct Keyframe {
   double median_depth_m = 0.0;  ///< median depth of the features with depth; 0 = none
 };
 using KeyframePtr = std::shared_ptr<const Keyframe>;
+
+/// Keyframes another part of the system keeps (the back end's map) near one of tracking's own
+/// keyframes, the anchor, each with its pose relative to the anchor. Before making a keyframe,
+/// tracking measures against one of them where the map already holds the view
+/// (VisualOdometry::setMapKeyframes). The keyframes are shared and immutable; their
+/// T_world_camera is in their keeper's frame, not tracking's.
+struct MapKeyframes {
+  struct Member {
+    KeyframePtr keyframe;
+    SE3 T_anchor_keyframe = SE3::Identity();
+  };
+  std::int64_t anchor_id = -1;  ///< -1: none
+  std::vector<Member> members;  ///< nearest first
+};
 
 /// What the back end keeps of a keyframe: a copy without the frame's images and without the
 /// grey image the features came from. Keypoints, descriptors, undistorted pixels, 3D points and

@@ -102,6 +102,9 @@ struct TrackingConfig {
   double keyframe_max_translation_m = 0.5;
   double keyframe_max_rotation_deg = 30.0;
   int keyframe_window = 30;
+  /// Before making a keyframe, also try the map's keyframes near the pose
+  /// (VisualOdometry::setMapKeyframes).
+  bool map_keyframes = true;
   int max_predicted_frames = 5;
   // After LOST, the first trackable frame is matched against the most recent keyframes (guided at
   // the last pose, then over the whole image) before a new segment starts at it: a camera that

@@ -66,10 +66,12 @@ struct OdometryStats {
   double reprojection_error_px = 0.0;  ///< RMS over the inliers
   bool used_guided_matching = false;
   bool used_previous_frame = false;  ///< the keyframe failed; tracked from the previous frame
-  int implausible_estimates = 0;     ///< estimates vetoed by the motion limits (then retried)
-  int prior_disagreements = 0;  ///< estimates rejected by the motion prior's gate (then retried)
-  int local_map_landmarks = 0;  ///< landmarks of covisible keyframes searched (local_map)
-  int local_map_inliers = 0;    ///< of those, matched and consistent with the pose
+  /// A keyframe of the map (setMapKeyframes) became the reference instead of a new keyframe.
+  bool used_map_keyframe = false;
+  int implausible_estimates = 0;  ///< estimates vetoed by the motion limits (then retried)
+  int prior_disagreements = 0;    ///< estimates rejected by the motion prior's gate (then retried)
+  int local_map_landmarks = 0;    ///< landmarks of covisible keyframes searched (local_map)
+  int local_map_inliers = 0;      ///< of those, matched and consistent with the pose
   bool used_dense_alignment = false;    ///< features failed; dense alignment measured the frame
   int dense_degenerate_directions = 0;  ///< directions dense alignment left to the motion prior
   double time_features_ms = 0.0;        ///< extraction + undistortion + depth
@@ -131,6 +133,12 @@ class VisualOdometry {
   /// the session's ids.
   void continueNumbering(std::int64_t next_keyframe_id, std::int64_t next_segment);
 
+  /// The keyframes the map (the back end) keeps near one of tracking's recent keyframes, the
+  /// anchor: when a frame calls for a new keyframe, the nearest of these and of tracking's own
+  /// recent keyframes are tried first (tracking.map_keyframes). Replaces the previous set; a set
+  /// whose anchor has left tracking's window is not used.
+  void setMapKeyframes(MapKeyframes map_keyframes);
+
   const TrackingConfig& config() const { return config_; }
   KeyframePtr currentKeyframe() const { return keyframe_; }
   TrackingState state() const { return state_; }
@@ -177,10 +185,13 @@ class VisualOdometry {
   /// features_with_depth: the current frame's.
   bool needsNewKeyframe(const TrackAttempt& attempt, const Keyframe& kf,
                         int features_with_depth) const;
-  /// Measures against a recent keyframe near T_world_curr instead of making a new one; true (and
-  /// attempt, T_world_curr and res updated) when one was good enough.
-  bool reuseRecentKeyframe(const CurrentFrame& curr, TrackAttempt& attempt, SE3& T_world_curr,
-                           OdometryResult& res);
+  /// Measures against a recent or map keyframe near T_world_curr instead of making a new one;
+  /// true (and attempt, T_world_curr and res updated) when one was good enough. attempt: the
+  /// measurement against keyframe_ when keyframe_was_reference.
+  bool reuseRecentKeyframe(const CurrentFrame& curr, TrackAttempt& attempt,
+                           bool keyframe_was_reference, SE3& T_world_curr, OdometryResult& res);
+  /// The keyframe of recent_keyframes_ with this id, or null.
+  const Keyframe* recentKeyframe(std::int64_t id) const;
   void refineInLocalWindow(const CurrentFrame& curr, TrackAttempt& attempt, SE3& T_world_curr,
                            OdometryResult& res);
   /// After LOST: measures the frame against the most recent keyframes (relocalization_*); true
@@ -197,6 +208,13 @@ class VisualOdometry {
                      TrackAttempt& attempt, SE3& T_world_curr, OdometryResult& res);
   /// Associates the attempt's inliers with the landmarks of the keyframe they were matched to.
   void associateWithKeyframe(const TrackAttempt& attempt, const Keyframe& kf);
+  /// The landmark of each current feature that is an inlier of the attempt against kf (-1: none;
+  /// empty when kf is not in the local map).
+  std::vector<std::int64_t> landmarksOfCurrent(const TrackAttempt& attempt,
+                                               const Keyframe& kf) const;
+  /// Appends a keyframe to recent_keyframes_ and the local map; drops the oldest beyond the
+  /// window.
+  void addToWindow(const KeyframePtr& keyframe, const std::vector<std::int64_t>& feature_landmarks);
   void addKeyframe(const CurrentFrame& curr, const RgbdFrame& frame, const RgbdFramePtr& frame_ptr,
                    const SE3& T_world_curr, OdometryResult& res);
   /// Dense alignment of the current frame against the last measured frame with depth, when
@@ -255,6 +273,7 @@ class VisualOdometry {
   TrackingState state_ = TrackingState::kNotInitialized;
   KeyframePtr keyframe_;
   std::deque<KeyframePtr> recent_keyframes_;  ///< the last keyframe_window keyframes (segment)
+  MapKeyframes map_keyframes_;                ///< setMapKeyframes()
   /// The landmarks of recent_keyframes_.
   LocalMap local_map_;
   /// The landmark each feature of the current frame was matched to (-1: none); the associations
