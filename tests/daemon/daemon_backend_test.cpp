@@ -81,8 +81,11 @@ TEST_F(DaemonWithBackEnd, ClosingTheLoopOfARoomLapReducesTrajectoryError) {
   EXPECT_LT(slam.ate_rmse_m, 1.05 * odometry.ate_rmse_m)
       << "ATE " << slam.ate_rmse_m << " m with the back end, " << odometry.ate_rmse_m
       << " m without";
-  std::printf("room lap: end drift %.4f m -> %.4f m, ATE %.4f m -> %.4f m\n", odometry.end_error_m,
-              slam.end_error_m, odometry.ate_rmse_m, slam.ate_rmse_m);
+  std::printf(
+      "room lap: end drift %.4f m -> %.4f m, ATE %.4f m -> %.4f m; %llu frames re-used a map "
+      "keyframe\n",
+      odometry.end_error_m, slam.end_error_m, odometry.ate_rmse_m, slam.ate_rmse_m,
+      static_cast<unsigned long long>(slam.summary.map_keyframe_reuses));
 }
 
 TEST_F(DaemonWithBackEnd, AfterTheLensIsCoveredTrackingResumesInTheSameMap) {

@@ -293,6 +293,58 @@ TEST_F(DaemonStageSteps, NoPacketFromBeforeAResetIsProcessedAfterAStageReset) {
   EXPECT_GT(publisher.poses[before.size() - 1].T_world_camera.translation().norm(), 1e-6);
 }
 
+// After each keyframe the back-end step hands the tracking step the keyframes it keeps near that
+// one, at their optimised poses relative to it; tracking takes each set before its next frame.
+TEST_F(DaemonStageSteps, TheBackEndHandsTrackingTheKeyframesItKeepsNearItsNewest) {
+  const int frames = 60;  // a few keyframes
+  Config config = smallSyntheticConfig(frames);
+  config.set("backend.enabled", "true");
+  config.set("backend.vocabulary_depth", "2");
+  std::unique_ptr<FrameSource> source = createFrameSource("synthetic:room", config);
+  source->open();
+  const FilterConfig filter_config = FilterConfig::load(config);
+  const BackendConfig backend_config = BackendConfig::load(config);
+  BackendStage backend(backend_config, loadVocabulary(backend_config));
+  RecordingPublisher publisher;
+  SpscQueue<PoseCorrection> pose_corrections(64);
+  SpscQueue<MapKeyframesPacket> map_keyframes(16);
+  CaptureStep capture(*source, 1'000'000'000, {});
+  TrackingStep tracking(TrackingConfig::load(config), &map_keyframes);
+  FilterStep filter(filter_config, nullptr, std::chrono::microseconds(0));
+  BackendStep backend_step(backend, "world", publisher, &pose_corrections, nullptr, &map_keyframes);
+  int sets = 0;
+  std::size_t largest_set = 0;
+  for (int i = 0; i < frames; ++i) {
+    SourceStep<CapturePacket> captured = capture.process();
+    ASSERT_EQ(captured.kind, SourceStep<CapturePacket>::Kind::kItem);
+    std::optional<TrackedPacket> tracked = tracking.process(std::move(*captured.item));
+    ASSERT_TRUE(tracked);
+    EXPECT_EQ(map_keyframes.sizeApprox(), 0u) << "tracking took the last set before frame " << i;
+    std::optional<EstimatedPacket> estimated = filter.process(std::move(*tracked));
+    ASSERT_TRUE(estimated);
+    const bool keyframe = estimated->odometry && estimated->odometry->is_keyframe;
+    backend_step.process(*estimated);
+    std::optional<MapKeyframesPacket> set = map_keyframes.tryPop();
+    EXPECT_EQ(set.has_value(), keyframe) << "frame " << i;
+    if (!set) continue;
+    ++sets;
+    const Backend& graph = backend.backend();
+    EXPECT_EQ(set->keyframes.anchor_id, estimated->odometry->keyframe->id);
+    EXPECT_EQ(set->reset_epoch, backend_step.resetEpoch());
+    largest_set = std::max(largest_set, set->keyframes.members.size());
+    const SE3 T_anchor_world = graph.pose(set->keyframes.anchor_id).inverse();
+    for (const MapKeyframes::Member& member : set->keyframes.members) {
+      ASSERT_NE(member.keyframe, nullptr);
+      EXPECT_TRUE(graph.graph().hasNode(member.keyframe->id));
+      const SE3 expected = T_anchor_world * graph.pose(member.keyframe->id);
+      EXPECT_LT((member.T_anchor_keyframe.translation() - expected.translation()).norm(), 1e-9);
+    }
+    ASSERT_TRUE(map_keyframes.tryPush(std::move(*set)));  // on to tracking
+  }
+  EXPECT_GE(sets, 2);
+  EXPECT_GE(largest_set, 1u) << "a later keyframe gets the earlier ones";
+}
+
 TEST_F(DaemonStageSteps, AResetSurvivesAnEdgeThatDropsPacketsAndReachesStagesWhilePaused) {
   CaptureStep capture(*source_, /*heartbeat_period_ns=*/0, {});
   TrackingStep tracking(TrackingConfig::load(config_));
