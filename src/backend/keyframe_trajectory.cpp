@@ -7,7 +7,6 @@ namespace slamd {
 void KeyframeAnchoredTrajectory::addKeyframe(const KeyframePtr& keyframe) {
   if (keyframe == nullptr) return;
   latest_anchor_ = addAnchor(keyframe->id, keyframe->segment, keyframe->T_world_camera);
-  have_keyframe_ = true;
 }
 
 std::size_t KeyframeAnchoredTrajectory::addAnchor(std::int64_t keyframe_id, std::int64_t segment,
@@ -18,7 +17,7 @@ std::size_t KeyframeAnchoredTrajectory::addAnchor(std::int64_t keyframe_id, std:
 }
 
 void KeyframeAnchoredTrajectory::addFrame(const OdometryResult& result, const SE3& T_world_camera) {
-  if (!have_keyframe_) return;
+  if (anchors_.empty()) return;  // before the first keyframe
   std::size_t anchor = latest_anchor_;
   if (result.stats.used_map_keyframe && result.reference_keyframe_id >= 0) {
     anchor = addAnchor(result.reference_keyframe_id, result.segment,

@@ -366,9 +366,8 @@ void LoopDetector::insertKeyframe(const KeyframePtr& keyframe_ptr) {
 }
 
 const FeatureSet* LoopDetector::features(std::int64_t id) const {
-  const auto found = std::find_if(entries_.begin(), entries_.end(),
-                                  [id](const Entry& e) { return e.id == id && !e.removed; });
-  return found != entries_.end() ? &found->features() : nullptr;
+  const KeyframePtr stored = keyframe(id);  // the detector holds it: the pointer stays valid
+  return stored != nullptr ? &stored->features : nullptr;
 }
 
 KeyframePtr LoopDetector::keyframe(std::int64_t id) const {

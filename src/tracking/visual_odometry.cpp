@@ -1061,9 +1061,8 @@ bool VisualOdometry::reuseRecentKeyframe(const CurrentFrame& curr, TrackAttempt&
       // keyframe, as it moves to a recent keyframe's reference when one is re-used.
       auto placed = std::make_shared<Keyframe>(*candidate.kf);
       placed->T_world_camera = candidate.T_world_kf;
-      const std::vector<std::int64_t> curr_landmarks = keyframe_was_reference
-                                                           ? landmarksOfCurrent(attempt, *keyframe_)
-                                                           : std::vector<std::int64_t>();
+      std::vector<std::int64_t> curr_landmarks;
+      if (keyframe_was_reference) associateWithKeyframe(attempt, *keyframe_, curr_landmarks);
       std::vector<std::int64_t> placed_landmarks(placed->features.size(), -1);
       for (std::size_t m = 0; m < reuse.matches.size(); ++m) {
         const Correspondence& c = reuse.matches[m];
@@ -1127,18 +1126,9 @@ void VisualOdometry::refineInLocalWindow(const CurrentFrame& curr, TrackAttempt&
   T_world_curr = normalizedSE3(keyframe_->T_world_camera * attempt.T_ref_curr);
 }
 
-void VisualOdometry::associateWithKeyframe(const TrackAttempt& attempt, const Keyframe& kf) {
-  const std::vector<std::int64_t> landmarks = landmarksOfCurrent(attempt, kf);
-  if (curr_landmarks_.size() < landmarks.size()) curr_landmarks_.resize(landmarks.size(), -1);
-  for (std::size_t i = 0; i < landmarks.size(); ++i) {
-    if (landmarks[i] >= 0) curr_landmarks_[i] = landmarks[i];
-  }
-}
-
-std::vector<std::int64_t> VisualOdometry::landmarksOfCurrent(const TrackAttempt& attempt,
-                                                             const Keyframe& kf) const {
-  std::vector<std::int64_t> curr_landmarks;
-  if (!local_map_.hasKeyframe(kf.id)) return curr_landmarks;
+void VisualOdometry::associateWithKeyframe(const TrackAttempt& attempt, const Keyframe& kf,
+                                           std::vector<std::int64_t>& curr_landmarks) const {
+  if (!local_map_.hasKeyframe(kf.id)) return;
   const std::vector<std::int64_t>& landmarks = local_map_.landmarksOf(kf.id);
   for (std::size_t k = 0; k < attempt.matches.size(); ++k) {
     const Correspondence& c = attempt.matches[k];
@@ -1147,7 +1137,6 @@ std::vector<std::int64_t> VisualOdometry::landmarksOfCurrent(const TrackAttempt&
     if (curr_index >= curr_landmarks.size()) curr_landmarks.resize(curr_index + 1, -1);
     curr_landmarks[curr_index] = landmarks[static_cast<std::size_t>(c.ref_index)];
   }
-  return curr_landmarks;
 }
 
 void VisualOdometry::collectLocalMapGroups(bool keyframe_is_reference) {
@@ -1431,7 +1420,7 @@ OdometryResult VisualOdometry::process(const RgbdFrame& frame, const RgbdFramePt
     keyframe_is_reference = true;
   }
   if (config_.local_map) {
-    if (keyframe_is_reference) associateWithKeyframe(attempt, *keyframe_);
+    if (keyframe_is_reference) associateWithKeyframe(attempt, *keyframe_, curr_landmarks_);
     trackLocalMap(curr, keyframe_is_reference ? keyframe_->T_world_camera : measured.T_world_ref,
                   keyframe_is_reference, attempt, T_world_curr, res);
   } else if (!measured.from_previous && config_.jointReferences() > 0) {

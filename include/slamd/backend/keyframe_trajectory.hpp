@@ -64,7 +64,6 @@ class KeyframeAnchoredTrajectory {
   std::vector<Anchor> anchors_;
   std::unordered_map<std::int64_t, std::size_t> anchor_of_keyframe_;  ///< the current one
   std::size_t latest_anchor_ = 0;
-  bool have_keyframe_ = false;
   std::vector<Frame> frames_;
 };
 

@@ -206,12 +206,11 @@ class VisualOdometry {
   /// T_world_curr and the current frame's landmark associations.
   void trackLocalMap(const CurrentFrame& curr, const SE3& T_world_ref, bool keyframe_is_reference,
                      TrackAttempt& attempt, SE3& T_world_curr, OdometryResult& res);
-  /// Associates the attempt's inliers with the landmarks of the keyframe they were matched to.
-  void associateWithKeyframe(const TrackAttempt& attempt, const Keyframe& kf);
-  /// The landmark of each current feature that is an inlier of the attempt against kf (-1: none;
-  /// empty when kf is not in the local map).
-  std::vector<std::int64_t> landmarksOfCurrent(const TrackAttempt& attempt,
-                                               const Keyframe& kf) const;
+  /// Associates the attempt's inliers with the landmarks of the keyframe they were matched to:
+  /// curr_landmarks[i] becomes the landmark of current feature i (grown as needed, -1 for
+  /// none); nothing when kf is not in the local map.
+  void associateWithKeyframe(const TrackAttempt& attempt, const Keyframe& kf,
+                             std::vector<std::int64_t>& curr_landmarks) const;
   /// Appends a keyframe to recent_keyframes_ and the local map; drops the oldest beyond the
   /// window.
   void addToWindow(const KeyframePtr& keyframe, const std::vector<std::int64_t>& feature_landmarks);
