@@ -9,14 +9,15 @@
 # series plotted against time, lap ends marked).
 #
 # The ping-pong sequence is a TUM folder of lists only: its rgb/ and depth/ are links to the
-# original's, and every lap keeps the original's frame spacing (reversed on backward laps), so
-# laps join without a jump in time or pose. Its ground truth is the original's, mapped the same
-# way.
+# frames played (an uncompressed copy of fr1/xyz, below), and every lap keeps the original's
+# frame spacing (reversed on backward laps), so laps join without a jump in time or pose. Its
+# ground truth is the original's, mapped the same way.
 #
 # Usage: scripts/bench-soak.sh [BUILD_DIR]. Environment: SLAMD_DATA_DIR (../shared/data),
 # SLAMD_SOAK_OUT (out/soak), SLAMD_SOAK_LAPS (10), SLAMD_SOAK_SET (extra --set assignments,
-# space separated). Needs python3 for the summary and the plot. Runs LCM inside a private network
-# namespace when run as root.
+# space separated), SLAMD_SOAK_IMAGES (uncompressed; png plays the benchmark's PNGs). Needs
+# python3 for the summary and the plot. Runs LCM inside a private network namespace when run as
+# root.
 set -euo pipefail
 BUILD_DIR=$(cd "${1:-build}" && pwd)
 BIN="$BUILD_DIR/bin"
@@ -31,22 +32,46 @@ if [ ! -f "$SOURCE_DIR/rgb.txt" ]; then
   echo "soak: skipped: $SOURCE_DIR (TUM fr1/xyz) is not here; set SLAMD_DATA_DIR" >&2
   exit 0
 fi
-for program in slamd slamd-export slamd-eval; do
+for program in slamd slamd-export slamd-eval slamd-play; do
   [ -x "$BIN/$program" ] || { echo "soak: $BIN/$program is not built" >&2; exit 1; }
 done
 command -v python3 > /dev/null || { echo "soak: python3 is needed for the summary" >&2; exit 1; }
 mkdir -p "$OUT"
 OUT=$(cd "$OUT" && pwd)
 
+# --- the frames, decoded once -------------------------------------------------------------------
+# A camera delivers decoded images. The benchmark's PNGs cost 6.4 ms of CPU a frame to inflate
+# (bench_capture, BM_TumJpegPngDecode), a fifth of a core at 30 Hz that would compete with
+# tracking and be charged to slamd. Like `make run`, the soak plays an uncompressed copy (PPM/PGM,
+# the same pixels and time stamps, 1.2 GB), made once in OUT and kept. SLAMD_SOAK_IMAGES=png plays
+# the PNGs themselves.
+IMAGES=${SLAMD_SOAK_IMAGES:-uncompressed}
+case "$IMAGES" in
+  png) FRAMES_DIR="$SOURCE_DIR" ;;
+  uncompressed)
+    FRAMES_DIR="$OUT/fr1_xyz_uncompressed"
+    if [ "$(cat "$FRAMES_DIR/.made_from" 2> /dev/null)" != "$SOURCE_DIR" ]; then
+      echo "soak: decoding $SOURCE_DIR into $FRAMES_DIR (once)"
+      rm -rf "$FRAMES_DIR"
+      "$BIN/slamd-play" --config "$ROOT/config/tum_fr1.yaml" --source "tum:$SOURCE_DIR" \
+        --write-tum "$FRAMES_DIR" --images uncompressed --log-level warn \
+        --set capture.preprocess.range_gate=false --set capture.preprocess.flying_pixels=false \
+        --set capture.preprocess.bilateral=false 2> "$OUT/decode.log" ||
+        { echo "soak: decoding failed (see $OUT/decode.log)" >&2; exit 1; }
+      echo "$SOURCE_DIR" > "$FRAMES_DIR/.made_from"
+    fi ;;
+  *) echo "soak: SLAMD_SOAK_IMAGES is uncompressed or png, not $IMAGES" >&2; exit 1 ;;
+esac
+
 # --- the ping-pong sequence ---------------------------------------------------------------------
 SEQUENCE="$OUT/fr1_xyz_pingpong_$LAPS"
 rm -rf "$SEQUENCE"
 mkdir -p "$SEQUENCE"
-ln -s "$SOURCE_DIR/rgb" "$SEQUENCE/rgb"
-ln -s "$SOURCE_DIR/depth" "$SEQUENCE/depth"
+ln -s "$FRAMES_DIR/rgb" "$SEQUENCE/rgb"
+ln -s "$FRAMES_DIR/depth" "$SEQUENCE/depth"
 # Lap k (0-based) maps an original time t to start + k * (span + gap) + (t - first) forward, or
 # + (last - t) backward, where first and last bound the rgb and depth stamps.
-bounds=$(grep -hv '^#' "$SOURCE_DIR/rgb.txt" "$SOURCE_DIR/depth.txt" |
+bounds=$(grep -hv '^#' "$FRAMES_DIR/rgb.txt" "$FRAMES_DIR/depth.txt" |
   awk 'NR == 1 { lo = $1; hi = $1 } { if ($1 < lo) lo = $1; if ($1 > hi) hi = $1 }
        END { printf "%.6f %.6f\n", lo, hi }')
 read -r FIRST LAST <<< "$bounds"
@@ -66,9 +91,9 @@ remap() {  # FILE: the lists' lines for all laps, sorted by the new time
       }
     }' | sort -n -k1,1
 }
-{ echo "# fr1/xyz played forward then backward, $LAPS laps"; remap "$SOURCE_DIR/rgb.txt"; } > "$SEQUENCE/rgb.txt"
-{ echo "# fr1/xyz played forward then backward, $LAPS laps"; remap "$SOURCE_DIR/depth.txt"; } > "$SEQUENCE/depth.txt"
-{ echo "# fr1/xyz ground truth, mapped like the frames"; remap "$SOURCE_DIR/groundtruth.txt"; } > "$SEQUENCE/groundtruth.txt"
+{ echo "# fr1/xyz played forward then backward, $LAPS laps"; remap "$FRAMES_DIR/rgb.txt"; } > "$SEQUENCE/rgb.txt"
+{ echo "# fr1/xyz played forward then backward, $LAPS laps"; remap "$FRAMES_DIR/depth.txt"; } > "$SEQUENCE/depth.txt"
+{ echo "# fr1/xyz ground truth, mapped like the frames"; remap "$FRAMES_DIR/groundtruth.txt"; } > "$SEQUENCE/groundtruth.txt"
 FRAMES=$(grep -vc '^#' "$SEQUENCE/rgb.txt")
 LAP_SECONDS=$(awk -v a="$FIRST" -v b="$LAST" 'BEGIN { printf "%.3f", b - a + 1.0 / 30.0 }')
 echo "soak: $FRAMES frames ($LAPS laps of fr1/xyz, ${LAP_SECONDS} s each) in real time; output in $OUT"
@@ -146,4 +171,4 @@ cd "$OUT"
 "$BIN/slamd-export" --log-level warn --status-csv status.csv soak.lcmlog
 "$BIN/slamd-eval" --json ate "$SEQUENCE/groundtruth.txt" trajectory.txt > ate.json
 python3 "$ROOT/scripts/soak-report.py" --out "$OUT" --laps "$LAPS" --lap-seconds "$LAP_SECONDS" \
-  --frames "$FRAMES"
+  --frames "$FRAMES" --images "$IMAGES"

@@ -136,6 +136,8 @@ def main():
     parser.add_argument("--laps", type=int, required=True)
     parser.add_argument("--lap-seconds", type=float, required=True)
     parser.add_argument("--frames", type=int, required=True)
+    parser.add_argument("--images", default="png",
+                        help="the image files played: png (the benchmark's) or uncompressed")
     args = parser.parse_args()
 
     rss, cpu = read_rss(os.path.join(args.out, "rss.tsv"))
@@ -217,6 +219,7 @@ def main():
     last = laps[-1] if laps else None
     summary = {
         "frames": args.frames,
+        "images": args.images,
         "laps": args.laps,
         "lap_seconds": args.lap_seconds,
         "ate_rmse_m": ate.get("rmse_m", ate.get("rmse")),

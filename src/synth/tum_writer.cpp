@@ -3,6 +3,7 @@
 #include <cinttypes>
 #include <cstdio>
 #include <filesystem>
+#include <optional>
 #include <stdexcept>
 #include <vector>
 
@@ -35,6 +36,12 @@ void writeImage(const std::filesystem::path& path, const cv::Mat& image, TumImag
 }
 
 }  // namespace
+
+std::optional<TumImageFormat> parseTumImageFormat(const std::string& name) {
+  if (name == "png") return TumImageFormat::kPng;
+  if (name == "uncompressed") return TumImageFormat::kUncompressed;
+  return std::nullopt;
+}
 
 std::string formatTumTimestamp(Utime utime) {
   char text[64];
@@ -73,15 +80,18 @@ void TumSequenceWriter::write(const RgbdFrame& frame) {
     throw std::runtime_error("frame " + std::to_string(frame.sequence) + " has negative utime " +
                              std::to_string(frame.utime));
   }
-  const std::string stamp = formatTumTimestamp(frame.utime);
+  // The depth map keeps its own capture time (a Kinect's depth and colour are not taken at the
+  // same instant; TumSource pairs them by time and tracking uses the difference).
+  const std::string rgb_stamp = formatTumTimestamp(frame.utime);
+  const std::string depth_stamp = formatTumTimestamp(frame.depthUtime());
   const std::filesystem::path root(folder_);
   const bool png = format_ == TumImageFormat::kPng;
-  const std::string rgb_name = "rgb/" + stamp + (png ? ".png" : ".ppm");
-  const std::string depth_name = "depth/" + stamp + (png ? ".png" : ".pgm");
+  const std::string rgb_name = "rgb/" + rgb_stamp + (png ? ".png" : ".ppm");
+  const std::string depth_name = "depth/" + depth_stamp + (png ? ".png" : ".pgm");
   writeImage(root / rgb_name, frame.color_bgr, format_);
   writeImage(root / depth_name, depthMetersToRaw(frame.depth_m, depth_scale_), format_);
-  rgb_list_ << stamp << " " << rgb_name << "\n";
-  depth_list_ << stamp << " " << depth_name << "\n";
+  rgb_list_ << rgb_stamp << " " << rgb_name << "\n";
+  depth_list_ << depth_stamp << " " << depth_name << "\n";
   if (!rgb_list_ || !depth_list_)
     throw std::runtime_error("cannot append to the lists in " + folder_);
   ++frames_written_;

@@ -3,6 +3,7 @@
 #include <cstring>
 #include <filesystem>
 #include <utility>
+#include <vector>
 
 #include <gtest/gtest.h>
 
@@ -226,6 +227,48 @@ TEST(TumSequenceWriter, WritesTimestampsAsTheBenchmarkDoes) {
   EXPECT_EQ(formatTumTimestamp(1305031102175304), "1305031102.175304");
   EXPECT_EQ(formatTumTimestamp(1600000000033333), "1600000000.033333");
   EXPECT_EQ(formatTumTimestamp(5), "0.000005");
+}
+
+TEST(TumSequenceWriter, ADepthMapTakenAtItsOwnTimeIsWrittenAndReadBackAtThatTime) {
+  // A Kinect's depth and colour images are taken up to half a frame apart (fr1/xyz: 0-20 ms);
+  // copying such a sequence must not move its depth to the colour's time.
+  const test::ScopedTempDir dir("synth-tum-depth-time");
+  auto source = test::makeSyntheticSource("corridor", {"synthetic.frames=3"});
+  std::vector<std::pair<Utime, Utime>> written_utimes;  // colour, depth
+  {
+    TumSequenceWriter writer(dir.string(), "test", 5000.0, TumImageFormat::kUncompressed);
+    writer.open();
+    source->open();
+    for (FrameRead read = source->next(std::chrono::milliseconds(100));
+         read.status == FrameRead::Status::kFrame;
+         read = source->next(std::chrono::milliseconds(100))) {
+      RgbdFrame frame = *read.frame;
+      frame.depth_utime = frame.utime - 12345;
+      writer.write(frame);
+      written_utimes.emplace_back(frame.utime, frame.depth_utime);
+    }
+    writer.finish({});
+  }
+  ASSERT_EQ(written_utimes.size(), 3u);
+  EXPECT_TRUE(std::filesystem::exists(dir.path() / "depth" /
+                                      (formatTumTimestamp(written_utimes[0].second) + ".pgm")));
+
+  Config config;
+  TumSource tum(dir.string(), TumSourceConfig::load(config));
+  tum.open();
+  for (const auto& [colour_utime, depth_utime] : written_utimes) {
+    const FrameRead read = tum.next(std::chrono::milliseconds(1000));
+    ASSERT_EQ(read.status, FrameRead::Status::kFrame) << read.message;
+    EXPECT_EQ(read.frame->utime, colour_utime);
+    EXPECT_EQ(read.frame->depth_utime, depth_utime);
+  }
+}
+
+TEST(TumSequenceWriter, ParsesTheImageFormatsTheToolsOffer) {
+  EXPECT_EQ(parseTumImageFormat("png"), TumImageFormat::kPng);
+  EXPECT_EQ(parseTumImageFormat("uncompressed"), TumImageFormat::kUncompressed);
+  EXPECT_FALSE(parseTumImageFormat("ppm").has_value());
+  EXPECT_FALSE(parseTumImageFormat("").has_value());
 }
 
 TEST(TumSequenceWriter, AnUnwritableFolderIsAnErrorNamingIt) {

@@ -4,12 +4,16 @@
 //   slamd-play --source tum:/data/fr1_xyz --config config/tum_fr1.yaml
 //   slamd-play --source openni2 --config config/xtion.yaml --publish --lcm-url udpm://...
 //   slamd-play --source lcm:SLAMD_FRAMES --write-tum /tmp/capture --set camera.depth_scale=1000
+//   slamd-play --source tum:/data/fr1_xyz --config config/tum_fr1.yaml --write-tum /tmp/fr1
+//       --images uncompressed --set capture.preprocess.range_gate=false
+//       --set capture.preprocess.flying_pixels=false      (one command: decoded once, to replay)
 
 #include <atomic>
 #include <csignal>
 #include <cstdio>
 #include <iostream>
 #include <memory>
+#include <optional>
 #include <sstream>
 
 #include <lcm/lcm-cpp.hpp>
@@ -82,6 +86,10 @@ int main(int argc, char** argv) {
   options.addOption("source", "SPEC", frameSourceSpecHelp());
   options.addOption("lcm-url", "URL", "LCM URL for --publish and lcm: sources (default: LCM's)");
   options.addOption("write-tum", "DIR", "write the frames as a TUM RGB-D folder");
+  options.addOption("images", "FORMAT",
+                    "images --write-tum writes: png | uncompressed (PPM/PGM: larger, but cheap to "
+                    "read in real time)",
+                    "png");
   options.addFlag("publish", "publish frames as slamd.rgbd_frame_t (capture.publish.*)");
   options.addFlag("list", "print one line per frame (sequence, utime, depth and colour sums)");
   if (!options.parse(argc, argv)) return options.exitCode();
@@ -122,8 +130,15 @@ int main(int argc, char** argv) {
 #endif
   if (options.has("write-tum")) {
 #ifdef SLAMD_HAVE_TUM_WRITER
+    const std::optional<TumImageFormat> format = parseTumImageFormat(options.value("images"));
+    if (!format) {
+      std::cerr << "slamd-play: --images " << options.value("images")
+                << " is not png or uncompressed\n";
+      return kExitUsage;
+    }
     writer = std::make_unique<TumSequenceWriter>(options.value("write-tum"),
-                                                 "slamd-play " + options.value("source"));
+                                                 "slamd-play " + options.value("source"), 5000.0,
+                                                 *format);  // the benchmark's scale
     try {
       writer->open();
     } catch (const std::exception& e) {

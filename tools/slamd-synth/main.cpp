@@ -42,13 +42,12 @@ int main(int argc, char** argv) {
   }
   const std::string scene = options.value("scene");
   const std::string out = options.value("out");
-  const std::string images = options.value("images");
-  if (images != "png" && images != "uncompressed") {
-    std::cerr << "slamd-synth: --images " << images << " is not png or uncompressed\n";
+  const std::optional<TumImageFormat> image_format = parseTumImageFormat(options.value("images"));
+  if (!image_format) {
+    std::cerr << "slamd-synth: --images " << options.value("images")
+              << " is not png or uncompressed\n";
     return kExitUsage;
   }
-  const TumImageFormat image_format =
-      images == "png" ? TumImageFormat::kPng : TumImageFormat::kUncompressed;
   int threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
   if (options.has("threads")) {
     try {
@@ -84,7 +83,7 @@ int main(int argc, char** argv) {
     // camera.depth_scale (default 5000, the TUM factor) so that the same configuration reads the
     // folder back with `tum:DIR`.
     TumSequenceWriter writer(out, "slamd-synth " + source->description(),
-                             source->config().camera.depth_scale, image_format);
+                             source->config().camera.depth_scale, *image_format);
     writer.open();
     // Frames depend only on their index: render `threads` of them at once, write them in order.
     std::deque<std::future<RgbdFramePtr>> rendering;

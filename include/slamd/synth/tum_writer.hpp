@@ -11,13 +11,15 @@
 // grey, value = depth in metres * 5000, 0 = no measurement), where <t> is the timestamp in
 // seconds with 6 decimals; rgb.txt and depth.txt list `timestamp filename` under three '#' header
 // lines; groundtruth.txt holds `timestamp tx ty tz qx qy qz qw` (T_world_camera of the optical
-// frame). Depth is rounded to the nearest 1/5000 m (0.2 mm). One thread owns a writer.
+// frame). Depth is rounded to the nearest 1/5000 m (0.2 mm) and written at the frame's depth
+// time (RgbdFrame::depthUtime), which may differ from the colour's. One thread owns a writer.
 //
 // TumImageFormat::kUncompressed writes the same pixels as binary PPM (colour) and 16-bit PGM
 // (depth) instead of PNG: about twice the bytes, but read back with a copy rather than inflate,
 // for folders replayed in real time, where decoding competes with tracking for the CPU.
 
 #include <fstream>
+#include <optional>
 #include <string>
 
 #include "slamd/common/rgbd_frame.hpp"
@@ -57,6 +59,9 @@ class TumSequenceWriter {
   std::ofstream depth_list_;
   int frames_written_ = 0;
 };
+
+/// "png" or "uncompressed" (the --images option of slamd-synth and slamd-play); nullopt otherwise.
+std::optional<TumImageFormat> parseTumImageFormat(const std::string& name);
 
 /// The timestamp of a utime as the benchmark writes it: seconds with 6 decimals.
 std::string formatTumTimestamp(Utime utime);
