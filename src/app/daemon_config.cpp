@@ -63,9 +63,11 @@ const ConfigSchema<DaemonConfig>& DaemonConfig::schema() {
                 "SAVE_MAP command received over LCM may name a file in; empty = commands may not "
                 "name files")
           .number("mapping_nice", &C::mapping_nice, 0, 19, "",
-                  "niceness of the mapping thread (off the capture-to-pose path)")
+                  "niceness of the mapping thread (off the capture-to-pose path) on a live or "
+                  "paced source; as fast as possible every stage runs at nice 0")
           .number("backend_nice", &C::backend_nice, 0, 19, "",
-                  "niceness of the back-end thread (off the capture-to-pose path)")
+                  "niceness of the back-end thread (off the capture-to-pose path) on a live or "
+                  "paced source; as fast as possible every stage runs at nice 0")
           .number("memory_limit_mb", &C::memory_limit_mb, 0, 1000000, "MB",
                   "resident memory to stay under, checked with every status message; above 80% "
                   "new keyframes are culled harder and kept without images or map clouds, above "

@@ -598,10 +598,12 @@ void slimBackendItem(EstimatedPacket& packet) {
 // thread's niceness. Datasets played as fast as possible wait for slow stages (nothing is lost,
 // runs are repeatable); live sources must never be held up: their frames are dropped oldest-first
 // (counted) and mapping skips to the newest frame. Mapping and the back end are off the
-// latency-critical path: their threads use what the others leave. The back end needs every
-// frame (a lost keyframe would break the graph) but must never hold up the filter, so on a live
-// source its queue grows instead (a long optimisation is caught up afterwards); it holds the
-// images of keyframes only.
+// latency-critical path: on a live (or paced) source their threads are niced, to use what the
+// others leave. As fast as possible there is no latency to protect (every frame waits in a
+// queue anyway), and a niced stage would only starve behind the others and slow the run. The back
+// end needs every frame (a lost keyframe would break the graph) but must never hold up the filter,
+// so on a live source its queue grows instead (a long optimisation is caught up afterwards); it
+// holds the images of keyframes only.
 void SlamDaemon::Impl::wire(Pipeline& pipeline) {
   DaemonSteps& s = *steps;
   const bool live = source->isLive();
@@ -635,8 +637,8 @@ void SlamDaemon::Impl::wire(Pipeline& pipeline) {
   if (s.backend) pipeline.addSink<EstimatedPacket>(
       "backend",   estimated, backend_in, body(*s.backend), slimBackendItem);
   //  thread options
-  if (s.mapping) pipeline.setStageNice("mapping", daemon.mapping_nice);
-  if (s.backend) pipeline.setStageNice("backend", daemon.backend_nice);
+  if (s.mapping && live) pipeline.setStageNice("mapping", daemon.mapping_nice);
+  if (s.backend && live) pipeline.setStageNice("backend", daemon.backend_nice);
   // clang-format on
 }
 
@@ -1064,6 +1066,9 @@ bool SlamDaemon::Impl::writeMetrics(const std::vector<StageStats>& stats) {
     json.key("corrections_caught_up").value(map_stats.corrections_caught_up);
     json.key("far_map_coarsenings").value(map_stats.far_map_coarsenings);
     json.key("far_map_blocks_merged").value(map_stats.far_map_blocks_merged);
+    if (steps && steps->mapping) {
+      json.key("catch_up_cycles_deferred").value(steps->mapping->stats().catch_up_cycles_deferred);
+    }
     json.endObject();
   }
   json.key("stages").beginObject();

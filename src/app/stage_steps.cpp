@@ -361,7 +361,8 @@ MappingStepStats MappingStep::stats() const {
   return MappingStepStats{leaf_voxels_.load(std::memory_order_relaxed),
                           occupied_voxels_.load(std::memory_order_relaxed),
                           keyframes_segmented_.load(std::memory_order_relaxed),
-                          pixels_snapped_.load(std::memory_order_relaxed)};
+                          pixels_snapped_.load(std::memory_order_relaxed),
+                          catch_up_cycles_deferred_.load(std::memory_order_relaxed)};
 }
 
 void MappingStep::applyCorrections() {
@@ -381,15 +382,29 @@ void MappingStep::applyCorrections() {
   }
 }
 
-void MappingStep::catchUp(std::int64_t cycle_start_ns) {
+void MappingStep::catchUp(std::int64_t cycle_start_ns, bool keyframe_mapped) {
   // New keyframes go in and keyframes a correction moved move a part at a time, in what is left
   // of this frame's budget, so that this stage's time per frame stays bounded however large the
   // map and the correction are.
-  const double spent_s = 1e-9 * static_cast<double>(steadyNowNs() - cycle_start_ns);
-  // At least one step a cycle, however late the cycle is: a machine too loaded for the rest of
-  // the cycle to fit the budget must still see the map follow a correction, a part a frame.
+  if (mapper_.keyframesQueued() == 0) {
+    deferred_last_cycle_ = false;
+    return;
+  }
+  const double left_s = step_budget_s_ - 1e-9 * static_cast<double>(steadyNowNs() - cycle_start_ns);
+  // A cycle that mapped a keyframe (its planes and cloud), or whose own work (an update, a voxel
+  // count) has left no room for a step like the last, leaves the steps to the next frames, most
+  // of which map nothing. But the map must follow on a machine too loaded for any cycle to fit
+  // the budget: a cycle after one that left waiting steps undone takes a step anyway, so the
+  // map moves at least a step every other frame.
+  const bool no_room = keyframe_mapped || left_s < mapper_.lastStepSeconds();
+  if (no_room && !deferred_last_cycle_) {
+    deferred_last_cycle_ = true;
+    catch_up_cycles_deferred_.fetch_add(1, std::memory_order_relaxed);
+    return;
+  }
+  deferred_last_cycle_ = false;
   constexpr double kOneStepBudgetS = 1e-9;
-  const CatchUpResult moved = mapper_.catchUp(std::max(step_budget_s_ - spent_s, kOneStepBudgetS));
+  const CatchUpResult moved = mapper_.catchUp(std::max(left_s, kOneStepBudgetS));
   if (moved.caught_up) {
     SLAMD_LOG_DEBUG(kLog) << "map caught up with the corrections ("
                           << mapper_.stats().keyframes_moved << " keyframe moves so far)";
@@ -531,6 +546,7 @@ void MappingStep::process(const EstimatedPacket& packet) {
   // until a correction gives them poses in its frame (the back end may place this run long
   // after tracking made them).
   const bool mapped = !map_frozen_ && (!awaiting_map_frame_ || keyframe_id.has_value());
+  bool keyframe_mapped = false;
   if (mapped && packet.frame && packet.odometry &&
       packet.pose.tracking_state != TrackingState::kLost &&
       packet.pose.tracking_state != TrackingState::kNotInitialized &&
@@ -552,19 +568,26 @@ void MappingStep::process(const EstimatedPacket& packet) {
       throw std::runtime_error("frame not mapped: " + result.error);
     }
     coarsenFarMap(T_world_camera);
+    keyframe_mapped = keyframe_id.has_value();
   }
-  publishOutputs(mapper_.poll(mapper_.latestUtime()));
-  // Counting voxels walks the whole tree: once a second is plenty for the status channel.
-  if (const std::int64_t now_ns = steadyNowNs(); now_ns >= next_voxel_count_ns_) {
-    const VoxelCounts counts = mapper_.countVoxels();
-    leaf_voxels_.store(static_cast<std::int64_t>(counts.leaves), std::memory_order_relaxed);
-    occupied_voxels_.store(static_cast<std::int64_t>(counts.occupied), std::memory_order_relaxed);
-    next_voxel_count_ns_ = nextWalkNs(now_ns, steadyNowNs() - now_ns, 1'000'000'000);
+  // A keyframe's planes and cloud are its cycle's work. The update and the voxel count wait for
+  // the next frame's cycle (most map nothing), so that one cycle does not stack them: the
+  // keyframes' cycles are the ones that set this stage's p99.
+  if (!keyframe_mapped) {
+    publishOutputs(mapper_.poll(mapper_.latestUtime()));
+    // Counting voxels walks the whole tree (tens of ms for a corridor's map): every few seconds
+    // is plenty for the status channel, and keeps these cycles out of the stage's p99.
+    if (const std::int64_t now_ns = steadyNowNs(); now_ns >= next_voxel_count_ns_) {
+      const VoxelCounts counts = mapper_.countVoxels();
+      leaf_voxels_.store(static_cast<std::int64_t>(counts.leaves), std::memory_order_relaxed);
+      occupied_voxels_.store(static_cast<std::int64_t>(counts.occupied), std::memory_order_relaxed);
+      next_voxel_count_ns_ = nextWalkNs(now_ns, steadyNowNs() - now_ns, kVoxelCountPeriodNs);
+    }
   }
   // Last, in what the frame's budget has left after everything else this cycle did (a full map,
   // a voxel count, a coarsening), so that those walks do not come on top of a whole budget's
   // steps: the cycle's time stays near the budget. Its changes go out with the next update.
-  if (!awaiting_map_frame_) catchUp(cycle_start_ns);
+  if (!awaiting_map_frame_) catchUp(cycle_start_ns, keyframe_mapped);
 }
 
 void MappingStep::coarsenFarMap(const SE3& T_world_camera) {

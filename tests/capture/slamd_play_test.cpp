@@ -36,12 +36,12 @@ TEST(SlamdPlay, AnUncompressedCopyOfATumFolderReadsBackAsTheSameFrames) {
   const std::filesystem::path copy = dir / "copy";
   const std::string camera =
       " --set camera.width=64 --set camera.height=48 --set camera.cx=31.5 --set camera.cy=23.5";
-  const std::string command =
-      std::string(SLAMD_PLAY_PATH) + " --source tum:" + original.dir.string() + camera +
-      " --write-tum " + copy.string() +
-      " --images uncompressed --set capture.preprocess.range_gate=false"
-      " --set capture.preprocess.flying_pixels=false > " +
-      (dir / "play.log").string() + " 2>&1";
+  const std::string command = std::string(SLAMD_PLAY_PATH) +
+                              " --source tum:" + original.dir.string() + camera + " --write-tum " +
+                              copy.string() +
+                              " --images uncompressed --set capture.preprocess.range_gate=false"
+                              " --set capture.preprocess.flying_pixels=false > " +
+                              (dir / "play.log").string() + " 2>&1";
   ASSERT_EQ(exitCode(command), 0) << "see " << dir / "play.log";
   char first_depth[64];
   std::snprintf(first_depth, sizeof(first_depth), "%.6f.pgm", original.depth_times[0]);
@@ -73,8 +73,7 @@ TEST(SlamdPlay, AnUncompressedCopyOfATumFolderReadsBackAsTheSameFrames) {
     EXPECT_EQ(missing, 1) << "frame " << i << ": the fixture's one hole";
     EXPECT_EQ(different, 0) << "frame " << i;
   }
-  EXPECT_EQ(from_copy.next(std::chrono::milliseconds(100)).status,
-            FrameRead::Status::kEndOfStream);
+  EXPECT_EQ(from_copy.next(std::chrono::milliseconds(100)).status, FrameRead::Status::kEndOfStream);
 #endif
 }
 
@@ -84,9 +83,9 @@ TEST(SlamdPlay, AnUnknownImageFormatIsAUsageError) {
 #else
   const auto original = test::writeTumFolder("play-bad-format", 1, false);
   const test::ScopedTempDir dir("play-bad-format-out");
-  const std::string command = std::string(SLAMD_PLAY_PATH) + " --source tum:" +
-                              original.dir.string() + " --write-tum " + (dir / "copy").string() +
-                              " --images jpeg > /dev/null 2>&1";
+  const std::string command = std::string(SLAMD_PLAY_PATH) +
+                              " --source tum:" + original.dir.string() + " --write-tum " +
+                              (dir / "copy").string() + " --images jpeg > /dev/null 2>&1";
   EXPECT_EQ(exitCode(command), 2);
 #endif
 }

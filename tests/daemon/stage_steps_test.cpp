@@ -35,12 +35,13 @@ class RecordingPublisher final : public DaemonPublisher {
   void publishOdometry(const OdometryResult&) override {}
   void publishVanishingPoint(Utime, const VanishingPointReport&) override {}
   void publishKeyframes(const KeyframeTrajectory&) override {}
-  void publishMapUpdate(const MapUpdate&) override {}
+  void publishMapUpdate(const MapUpdate&) override { ++updates; }
   void publishFullMap(const FullMap& map) override { full_maps.push_back(map); }
   void publishPlaneMap(const planes::PlaneMapSnapshot& plane_map) override {
     plane_maps.push_back(plane_map);
   }
   std::vector<PoseEstimate> poses;
+  int updates = 0;
   std::vector<FullMap> full_maps;
   std::vector<planes::PlaneMapSnapshot> plane_maps;
 };
@@ -467,13 +468,35 @@ std::size_t occupancyDisagreements(const octomap::OcTree& a, const octomap::OcTr
   return disagreements;
 }
 
+/// What the filter hands the mapping step: a tracked frame at T_world_camera, a keyframe when
+/// keyframe_id is set.
+EstimatedPacket mappingPacket(const RgbdFramePtr& frame, std::optional<std::int64_t> keyframe_id,
+                              const SE3& T_world_camera) {
+  EstimatedPacket p;
+  p.frame = frame;
+  p.odometry.emplace();
+  p.odometry->utime = frame->utime;
+  if (keyframe_id) {
+    auto keyframe = std::make_shared<Keyframe>();
+    keyframe->id = *keyframe_id;
+    p.odometry->is_keyframe = true;
+    p.odometry->keyframe = keyframe;
+  }
+  p.pose.utime = frame->utime;
+  p.pose.T_world_camera = T_world_camera;
+  p.pose.tracking_state = TrackingState::kOk;
+  return p;
+}
+
 // Issue 24 item 3: keyframes mapped at drifted poses, then a back-end correction. The mapping
-// step moves them a step per frame within its budget, never the whole map at once, and once it
-// has caught up the map it publishes is the map of those keyframes at the corrected poses.
-TEST_F(DaemonStageSteps, TheMapFollowsACorrectionAStepPerFrameAndThenMatchesTheCorrectedPoses) {
+// step moves them a step at a time within its budget, never the whole map at once; with no
+// room in any frame's budget, still a step every other frame. Once it has caught up, the map it
+// publishes is the map of those keyframes at the corrected poses.
+TEST_F(DaemonStageSteps,
+       TheMapFollowsACorrectionAStepEveryOtherFrameAndThenMatchesTheCorrectedPoses) {
   config_.set("mapping.full_map_period_s", "0");
   config_.set("mapping.update_rate_hz", "0");
-  config_.set("mapping.keyframe_step_budget_ms", "0.001");  // one step per frame
+  config_.set("mapping.keyframe_step_budget_ms", "0.001");  // no room for a step in any frame
   MappingConfig mapping_config = MappingConfig::load(config_);
   mapping_config.keyframes_only = true;  // as the daemon sets it when the back end runs
   // The reference integrates the frames as measured: the step must too (no depth snapped onto
@@ -488,23 +511,6 @@ TEST_F(DaemonStageSteps, TheMapFollowsACorrectionAStepPerFrameAndThenMatchesTheC
 
   BackendCorrection correction;
   std::vector<RgbdFramePtr> frames;
-  auto packet = [](const RgbdFramePtr& frame, std::optional<std::int64_t> keyframe_id,
-                   const SE3& T_world_camera) {
-    EstimatedPacket p;
-    p.frame = frame;
-    p.odometry.emplace();
-    p.odometry->utime = frame->utime;
-    if (keyframe_id) {
-      auto keyframe = std::make_shared<Keyframe>();
-      keyframe->id = *keyframe_id;
-      p.odometry->is_keyframe = true;
-      p.odometry->keyframe = keyframe;
-    }
-    p.pose.utime = frame->utime;
-    p.pose.T_world_camera = T_world_camera;
-    p.pose.tracking_state = TrackingState::kOk;
-    return p;
-  };
   for (int i = 0; i < kFrames; ++i) {
     const FrameRead read = source_->next(std::chrono::milliseconds(1000));
     ASSERT_EQ(read.status, FrameRead::Status::kFrame);
@@ -514,12 +520,12 @@ TEST_F(DaemonStageSteps, TheMapFollowsACorrectionAStepPerFrameAndThenMatchesTheC
     drifted.translation() += static_cast<double>(i) * Eigen::Vector3d(0.02, -0.01, 0.03);
     drifted.linear() =
         Eigen::AngleAxisd(0.005 * i, Eigen::Vector3d::UnitY()).toRotationMatrix() * T_true.linear();
-    mapping.process(packet(read.frame, i, drifted));
+    mapping.process(mappingPacket(read.frame, i, drifted));
     reference.integrate(*read.frame, T_true, i);
     correction.keyframe_poses.emplace_back(i, T_true);
   }
   ASSERT_EQ(mapper.stats().keyframe_clouds, kFrames);
-  // The keyframes went into the queue; a step a frame has put only some of them in so far.
+  // The keyframes went into the queue; a step every other frame has put only some in so far.
   EXPECT_GT(mapper.keyframesQueued(), 0u);
   mapper.catchUp(std::numeric_limits<double>::infinity());
   EXPECT_GT(occupancyDisagreements(*reference.ocTree(), *mapper.ocTree()), 1000u);
@@ -534,19 +540,20 @@ TEST_F(DaemonStageSteps, TheMapFollowsACorrectionAStepPerFrameAndThenMatchesTheC
     return frame;
   };
   do {
-    mapping.process(packet(laterFrame(), std::nullopt, SE3::Identity()));
+    mapping.process(mappingPacket(laterFrame(), std::nullopt, SE3::Identity()));
     ++frames_to_catch_up;
   } while (mapper.keyframesQueued() > 0 && frames_to_catch_up < 100);
-  // Keyframe 0 did not drift; each part of the others is taken out, then put in: at most a step
-  // a frame with this budget (none in a frame whose budget the correction's bookkeeping used up).
-  EXPECT_GE(frames_to_catch_up, 2 * (kFrames - 1));
+  // Keyframe 0 did not drift; each part of the others is taken out, then put in: at least two
+  // steps each, and with no room in any frame's budget a step every other frame, no more.
+  EXPECT_GE(frames_to_catch_up, 2 * 2 * (kFrames - 1) - 1);
+  EXPECT_GT(mapping.stats().catch_up_cycles_deferred, 0);
   EXPECT_LT(frames_to_catch_up, 100);
   EXPECT_EQ(mapper.stats().keyframes_moved, kFrames - 1);
   EXPECT_EQ(mapper.stats().frames_integrated, kFrames);  // the other frames were not mapped
 
   // The map published after catching up (a full map: voxels became unknown) is the map of the
   // keyframes at their corrected poses.
-  mapping.process(packet(laterFrame(), std::nullopt, SE3::Identity()));
+  mapping.process(mappingPacket(laterFrame(), std::nullopt, SE3::Identity()));
   ASSERT_FALSE(publisher.full_maps.empty());
   std::string why;
   const std::unique_ptr<octomap::OcTree> published =
@@ -554,6 +561,48 @@ TEST_F(DaemonStageSteps, TheMapFollowsACorrectionAStepPerFrameAndThenMatchesTheC
   ASSERT_NE(published, nullptr) << why;
   EXPECT_EQ(occupancyDisagreements(*reference.ocTree(), *published), 0u);
   EXPECT_EQ(occupancyDisagreements(*published, *reference.ocTree()), 0u);
+}
+
+// Issue 24 (mapping p99): a cycle that maps a keyframe (its planes and cloud) does not also
+// put waiting parts in, publish an update or count voxels; the next frame, which maps nothing,
+// does them in its budget. A second keyframe straight after still takes a step, so the map
+// never stalls behind keyframes.
+TEST_F(DaemonStageSteps, AKeyframesCycleLeavesCatchUpStepsAndTheUpdateToTheNextFrame) {
+  config_.set("mapping.full_map_period_s", "0");
+  config_.set("mapping.update_rate_hz", "1000");           // an update whenever something changed
+  config_.set("mapping.keyframe_step_budget_ms", "1000");  // room for every step in other frames
+  MappingConfig mapping_config = MappingConfig::load(config_);
+  mapping_config.keyframes_only = true;
+  Mapper mapper(mapping_config);
+  RecordingPublisher publisher;
+  MappingStep mapping(mapper, mapping_config, publisher, nullptr, nullptr);
+  const Trajectory truth = *source_->groundTruth();
+  std::vector<RgbdFramePtr> frames;
+  for (int i = 0; i < 3; ++i) {
+    const FrameRead read = source_->next(std::chrono::milliseconds(1000));
+    ASSERT_EQ(read.status, FrameRead::Status::kFrame);
+    frames.push_back(read.frame);
+  }
+  auto pose = [&](int i) { return truth.at(static_cast<std::size_t>(i)).T_world_camera; };
+
+  mapping.process(mappingPacket(frames[0], 0, pose(0)));
+  EXPECT_EQ(mapper.stats().keyframe_clouds, 1u);
+  EXPECT_EQ(mapper.keyframesQueued(), 1u) << "its parts wait for the next frame";
+  EXPECT_EQ(mapping.stats().catch_up_cycles_deferred, 1);
+  EXPECT_EQ(publisher.updates + static_cast<int>(publisher.full_maps.size()), 0);
+
+  // A frame that maps nothing puts the keyframe in; the next publishes it.
+  mapping.process(mappingPacket(frames[1], std::nullopt, pose(1)));
+  EXPECT_EQ(mapper.keyframesQueued(), 0u);
+  mapping.process(mappingPacket(frames[2], std::nullopt, pose(2)));
+  EXPECT_GT(publisher.updates + static_cast<int>(publisher.full_maps.size()), 0);
+
+  // Two keyframes in a row: the first defers, the second takes a step anyway.
+  mapping.process(mappingPacket(frames[1], 1, pose(1)));
+  EXPECT_EQ(mapping.stats().catch_up_cycles_deferred, 2);
+  mapping.process(mappingPacket(frames[2], 2, pose(2)));
+  EXPECT_EQ(mapping.stats().catch_up_cycles_deferred, 2) << "the second keyframe's cycle stepped";
+  EXPECT_LE(mapper.keyframesQueued(), 1u);
 }
 
 }  // namespace

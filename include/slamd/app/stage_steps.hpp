@@ -478,9 +478,11 @@ struct MapCorrection {
 
 struct MappingStepStats {
   std::int64_t leaf_voxels = 0;
-  std::int64_t occupied_voxels = 0;      ///< counted once a second
+  std::int64_t occupied_voxels = 0;      ///< counted every few seconds
   std::int64_t keyframes_segmented = 0;  ///< keyframes whose planes went into the plane map
   std::int64_t pixels_snapped = 0;       ///< keyframe pixels moved onto their plane
+  /// Cycles that left waiting catch-up steps to the next frame (no room left in their budget).
+  std::int64_t catch_up_cycles_deferred = 0;
 };
 
 /// Integrates each tracked frame (or keyframe) into the map at its corrected pose, moves the
@@ -525,10 +527,13 @@ class MappingStep : public StepBase {
   }
   static constexpr std::size_t kKeptCloudsOverTheLimit = 20;
   static constexpr std::int64_t kCoarseningPeriodNs = 5'000'000'000;
+  /// How often the voxels are counted for the status channel, at most (a walk of the map).
+  static constexpr std::int64_t kVoxelCountPeriodNs = 5'000'000'000;
 
  private:
   void applyCorrections();
-  void catchUp(std::int64_t cycle_start_ns);
+  /// Catch-up steps in what is left of the cycle's budget (see stage_steps.cpp).
+  void catchUp(std::int64_t cycle_start_ns, bool keyframe_mapped);
   /// Forgets the kept clouds and planes of keyframes a correction no longer lists (culled by the
   /// back end).
   void forgetCulledKeyframes(const std::vector<std::pair<std::int64_t, SE3>>& keyframe_poses);
@@ -558,6 +563,8 @@ class MappingStep : public StepBase {
   SpscQueue<MapRequest>* requests_;
   std::int64_t next_voxel_count_ns_ = 0;
   std::int64_t next_coarsening_ns_ = 0;
+  bool deferred_last_cycle_ = false;  ///< the last cycle left waiting catch-up steps undone
+  std::atomic<std::int64_t> catch_up_cycles_deferred_{0};  ///< cycles that did so
   /// The back end's correction: uncorrected (filter) world -> corrected world.
   SE3 T_world_uncorrected_ = SE3::Identity();
   bool snapshot_failing_ = false;    ///< the last periodic snapshot failed

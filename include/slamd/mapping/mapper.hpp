@@ -257,6 +257,8 @@ class Mapper {
   /// poll() emits.
   CatchUpResult catchUp(double budget_s);
   std::size_t keyframesQueued() const { return keyframes_queued_.size(); }
+  /// How long catchUp()'s last step took (0 before the first): what the next one will cost.
+  double lastStepSeconds() const { return last_step_s_; }
   /// Forgets a keyframe (culled by the back end): its contribution is taken out of the map and
   /// its cloud dropped.
   void forgetKeyframe(std::int64_t keyframe_id);
