@@ -5,12 +5,15 @@
 //   slamd-map-save --out map.bt --once           # write as soon as one full map has arrived
 //   slamd-map-save --out map.bt --ply map.ply --timeout 5   # stop 5 s after the last message
 //
-// Malformed or inconsistent messages are counted and skipped; a gap in the update sequence makes
-// the copy wait for the next full map (ask slamd with `slamd-cmd publish-map`).
+// Malformed or inconsistent messages are counted and skipped. A gap in the update sequence (LCM
+// over UDP drops a large message when the receive buffer is small) makes the copy wait for a
+// full map: it asks slamd for one (PUBLISH_MAP on the command channel, at most once a second)
+// rather than waiting for the periodic one.
 
 #include <iostream>
 #include <mutex>
 
+#include "slamd/command_t.hpp"
 #include "slamd/common/log.hpp"
 #include "slamd/common/program_options.hpp"
 #include "slamd/common/shutdown_signals.hpp"
@@ -59,6 +62,8 @@ int main(int argc, char** argv) {
   std::int64_t full_maps = 0;
   std::int64_t inconsistent = 0;
   std::int64_t last_message_ns = steadyNowNs();
+  std::int64_t last_request_ns = 0;
+  std::int64_t full_map_requests = 0;
   try {
     LcmBus bus(channels.lcm_url);
     bus.subscribe<slamd::voxel_map_update_t>(
@@ -91,12 +96,23 @@ int main(int argc, char** argv) {
         << "listening on " << channels.map_update << " and " << channels.map;
     while (!signals.waitFor(std::chrono::milliseconds(200))) {
       std::lock_guard<std::mutex> lock(mutex);
-      if (timeout_s > 0 && (steadyNowNs() - last_message_ns) * 1e-9 > timeout_s) break;
+      const std::int64_t now_ns = steadyNowNs();
+      if (timeout_s > 0 && (now_ns - last_message_ns) * 1e-9 > timeout_s) break;
+      if (!replica.synchronised() && now_ns - last_request_ns >= 1'000'000'000) {
+        slamd::command_t command{};
+        command.utime = wallClockUtime();
+        command.command = slamd::command_t::PUBLISH_MAP;
+        bus.publishMessage(channels.command, command);
+        last_request_ns = now_ns;
+        ++full_map_requests;
+        SLAMD_LOG_INFO("slamd-map-save") << "map copy has a gap: asked slamd for a full map";
+      }
     }
     bus.stopHandling();
     std::lock_guard<std::mutex> lock(mutex);
     std::cerr << "slamd-map-save: " << replica.updatesApplied() << " updates applied, "
-              << replica.updatesSkipped() << " skipped, " << full_maps << " full maps, "
+              << replica.updatesSkipped() << " skipped, " << full_maps << " full maps ("
+              << full_map_requests << " asked for), "
               << inconsistent + static_cast<std::int64_t>(bus.malformedTotal())
               << " malformed or inconsistent messages; " << replica.tree().getNumLeafNodes()
               << " voxels"

@@ -774,7 +774,6 @@ MapUpdate Mapper::takeUpdate() {
   update.utime = latest_utime_;
   update.resolution_m = resolution();
   update.frame_id = config_.frame_id;
-  update.sequence = next_update_sequence_++;
   const bool new_free = config_.update_new_free_voxels;
   withTree([&update, new_free](auto& tree) {
     update.voxels.reserve(tree.numChangesDetected());
@@ -790,6 +789,12 @@ MapUpdate Mapper::takeUpdate() {
     }
     tree.resetChangeDetection();
   });
+  // Only updates with voxels are sent (MappingStep::publishOutputs), so only they take a sequence
+  // number: a number taken by an update never sent (new free voxels only, which are not sent)
+  // would look like a lost message to subscribers, who would then wait for a full map.
+  update.sequence = next_update_sequence_;
+  if (update.voxels.empty()) return update;
+  ++next_update_sequence_;
   ++stats_.updates_published;
   return update;
 }

@@ -124,6 +124,11 @@ TEST_F(DaemonScenario, TheWebViewerShowsTheRunInHeadlessChromiumAndRidesThroughA
   EXPECT_EQ(run("web_viewer", &log), 0) << log;
 }
 
+TEST_F(DaemonScenario, ALateMapSubscriberAsksForAFullMapAndEndsSynchronised) {
+  std::string log;
+  EXPECT_EQ(run("map_save_late_join", &log), 0) << log;
+}
+
 TEST_F(DaemonScenario, AFullDiskKeepsTheLastSnapshotAndTheSaveIsRetried) {
   std::string log;
   EXPECT_EQ(run("full_disk", &log), 0) << log;

@@ -208,6 +208,29 @@ TEST(Mapper, RaysBeyondMaxRangeOnlyClearSpace) {
   EXPECT_EQ(mapper.occupancyAt({0.0, 0.0, 2.0}), -1);
 }
 
+TEST(Mapper, AnUpdateWithNoVoxelsTakesNoSequenceNumber) {
+  // New free voxels are not sent (update_new_free_voxels off), so an update holding only those
+  // is empty and not sent: had it taken a number, subscribers would see a gap, count the next
+  // updates as skipped and wait for a full map.
+  MappingConfig config = testConfig();
+  config.update_new_free_voxels = false;
+  config.max_range_m = 1.0;
+  config.voxel_filter_m = 0.0;
+  Mapper mapper(config);
+  PointCloud beyond_range;
+  beyond_range.points = {{0.0f, 0.0f, 3.01f}};  // clears space only
+  ASSERT_EQ(mapper.integrateCloud(beyond_range, SE3::Identity(), 0).status, IntegrationStatus::kOk);
+  const MapUpdate nothing_to_send = mapper.takeUpdate();
+  EXPECT_TRUE(nothing_to_send.voxels.empty());
+  PointCloud wall;
+  wall.points = {{0.1f, 0.0f, 0.8f}};
+  ASSERT_EQ(mapper.integrateCloud(wall, SE3::Identity(), 1).status, IntegrationStatus::kOk);
+  const MapUpdate first_sent = mapper.takeUpdate();
+  EXPECT_FALSE(first_sent.voxels.empty());
+  EXPECT_EQ(first_sent.sequence, 0);
+  EXPECT_EQ(mapper.fullMap().update_sequence, 1);
+}
+
 TEST(Mapper, PollEmitsUpdatesAtTheConfiguredRateAndFullMapsOnRequest) {
   MappingConfig config = testConfig();
   config.update_rate_hz = 10.0;

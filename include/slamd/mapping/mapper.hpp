@@ -207,7 +207,8 @@ class Mapper {
   /// An update is always emitted before a full map so that the map's
   /// update_sequence covers it. Empty updates are not emitted.
   MapperOutputs poll(Utime now);
-  /// The changes since the previous update (possibly none); advances the sequence.
+  /// The changes since the previous update (possibly none); advances the sequence when it holds
+  /// voxels (an empty update is not sent, so it takes no number).
   MapUpdate takeUpdate();
   /// The whole map now. Does not advance the update sequence.
   FullMap fullMap();
