@@ -2,7 +2,8 @@
 # slamd-map-save joins a running slamd late, with no periodic full maps: its first update comes
 # with a sequence number after others it never saw (as after a message lost on UDP). It asks
 # slamd for a full map (PUBLISH_MAP) instead of waiting for one, and ends with a synchronised
-# copy of the map.
+# copy of the map. (How many updates follow the full map depends on the machine's speed: under
+# the sanitizers slamd may finish first, so they are not counted.)
 source "$(dirname "$0")/lib.sh"
 private_network
 cd "$WORK"
@@ -28,5 +29,4 @@ grep -q "map copy has a gap: asked slamd for a full map" map-save.txt ||
 grep -Eq "[1-9][0-9]* full maps \([1-9][0-9]* asked for\)" map-save.txt ||
   fail "no full map arrived after slamd-map-save asked for one"
 if grep -q "NOT synchronised" map-save.txt; then fail "the copy ended unsynchronised"; fi
-grep -Eq "[1-9][0-9]* updates applied" map-save.txt || fail "no update was applied after the full map"
-check "a late slamd-map-save asked for a full map, got it, and applied the updates after it"
+check "a late slamd-map-save asked for a full map and got it: its copy ends synchronised"
