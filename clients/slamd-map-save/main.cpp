@@ -62,7 +62,7 @@ int main(int argc, char** argv) {
   std::int64_t full_maps = 0;
   std::int64_t inconsistent = 0;
   std::int64_t last_message_ns = steadyNowNs();
-  std::int64_t last_request_ns = 0;
+  FullMapRequestPacer requests;
   std::int64_t full_map_requests = 0;
   try {
     LcmBus bus(channels.lcm_url);
@@ -98,12 +98,11 @@ int main(int argc, char** argv) {
       std::lock_guard<std::mutex> lock(mutex);
       const std::int64_t now_ns = steadyNowNs();
       if (timeout_s > 0 && (now_ns - last_message_ns) * 1e-9 > timeout_s) break;
-      if (!replica.synchronised() && now_ns - last_request_ns >= 1'000'000'000) {
+      if (requests.due(replica, now_ns, 1.0)) {
         slamd::command_t command{};
         command.utime = wallClockUtime();
         command.command = slamd::command_t::PUBLISH_MAP;
         bus.publishMessage(channels.command, command);
-        last_request_ns = now_ns;
         ++full_map_requests;
         SLAMD_LOG_INFO("slamd-map-save") << "map copy has a gap: asked slamd for a full map";
       }

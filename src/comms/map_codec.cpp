@@ -177,6 +177,15 @@ MapReplica::UpdateResult MapReplica::applyUpdate(const MapUpdate& update) {
   return UpdateResult::kApplied;
 }
 
+bool FullMapRequestPacer::due(const MapReplica& replica, std::int64_t now_ns, double period_s) {
+  if (replica.synchronised()) return false;
+  if (last_request_ns_ != 0 && static_cast<double>(now_ns - last_request_ns_) * 1e-9 < period_s) {
+    return false;
+  }
+  last_request_ns_ = now_ns;
+  return true;
+}
+
 bool MapReplica::applyFullMap(const FullMap& map, std::string* error) {
   std::unique_ptr<octomap::OcTree> tree = fullMapToOcTree(map, error);
   if (!tree) {

@@ -221,12 +221,7 @@ void ViewerModel::resyncOccupiedFromTree() {
 }
 
 bool ViewerModel::wantsFullMap(std::int64_t now_ns) {
-  if (replica_.synchronised()) return false;
-  if (last_map_request_ns_ != 0 &&
-      (now_ns - last_map_request_ns_) * 1e-9 < options_.map_request_period_s) {
-    return false;
-  }
-  last_map_request_ns_ = now_ns;
+  if (!map_requests_.due(replica_, now_ns, options_.map_request_period_s)) return false;
   ++counters_.map_requests;
   return true;
 }

@@ -154,6 +154,20 @@ TEST(MapCodec, ALostUpdateOrARebuildWaitsForTheNextFullMap) {
   EXPECT_EQ(occupiedSet(replica.tree()), occupiedSet(*mapper.ocTree()));
 }
 
+TEST(MapCodec, FullMapRequestsGoOutAtOnceAfterAGapThenAtMostOncePerPeriod) {
+  constexpr std::int64_t kSecond = 1'000'000'000;
+  MapReplica replica;
+  FullMapRequestPacer requests;
+  EXPECT_FALSE(requests.due(replica, kSecond, 1.0)) << "synchronised: nothing to ask for";
+  MapUpdate after_a_gap;
+  after_a_gap.resolution_m = 0.05;
+  after_a_gap.sequence = 1;  // update 0 never arrived
+  ASSERT_EQ(replica.applyUpdate(after_a_gap), MapReplica::UpdateResult::kWaitingForFullMap);
+  EXPECT_TRUE(requests.due(replica, 2 * kSecond, 1.0));
+  EXPECT_FALSE(requests.due(replica, 2 * kSecond + kSecond / 2, 1.0));
+  EXPECT_TRUE(requests.due(replica, 3 * kSecond, 1.0));
+}
+
 TEST(MapCodec, MalformedMessagesAreRejectedWithoutCrashing) {
   Mapper mapper(streamingConfig());
   const test::BoxRoom room;

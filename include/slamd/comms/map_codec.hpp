@@ -91,4 +91,16 @@ class MapReplica {
   std::int64_t rejected_ = 0;
 };
 
+/// Paces a subscriber's requests for a full map (PUBLISH_MAP on the command channel) while its
+/// replica waits for one after a gap: the first at once, then at most one per period. Kept apart
+/// from the replica so that a replica started afresh (the publisher restarted) keeps the pace.
+class FullMapRequestPacer {
+ public:
+  /// True when a request should go out now (and counts it as sent at now_ns).
+  bool due(const MapReplica& replica, std::int64_t now_ns, double period_s);
+
+ private:
+  std::int64_t last_request_ns_ = 0;  ///< 0: none yet
+};
+
 }  // namespace slamd

@@ -137,7 +137,7 @@ class ViewerModel {
   std::vector<std::string> pending_resets_;  ///< reasons, sent before anything else
   std::int64_t last_message_ns_ = 0;
   std::int64_t last_viewer_message_ns_ = 0;
-  std::int64_t last_map_request_ns_ = 0;
+  FullMapRequestPacer map_requests_;
   std::int64_t malformed_ = 0;
   std::size_t clients_ = 0;
   ViewerCounters counters_;
