@@ -276,7 +276,12 @@ int main(int argc, char** argv) {
   Trajectory frames_online;
   std::vector<double> loop_ms, optimisation_ms, local_ms, iterations, backend_cpu_ms;
   int optimisations = 0, full_optimisations = 0, lost_frames = 0, relocalization_attempts = 0;
-  int map_keyframe_reuses = 0;  // frames that took a map keyframe instead of making one
+  int map_keyframe_reuses = 0;       // frames that took a map keyframe instead of making one
+  int relocalization_keyframes = 0;  // keyframes made early for the back end to relocalise
+  // Frames posed while their segment was not yet placed in the map: the online pose is then in
+  // the segment's own frame, off by whatever the loss did.
+  int frames_awaiting_relocalization = 0;
+  bool relocalization_pending = false;
   SE3 T_world_odometry = SE3::Identity();
   long index = 0;
   while (max_frames <= 0 || index < max_frames) {
@@ -288,6 +293,7 @@ int main(int argc, char** argv) {
     ++index;
     if (r.tracking_state == TrackingState::kLost) ++lost_frames;
     if (r.stats.used_map_keyframe) ++map_keyframe_reuses;
+    if (r.stats.relocalization_keyframe) ++relocalization_keyframes;
     if (r.keyframe) {
       trajectory.addKeyframe(r.keyframe);
       const bool same_segment =
@@ -305,6 +311,7 @@ int main(int argc, char** argv) {
               .count();
       backend_cpu_ms.push_back(threadCpuMs() - cpu_start_ms);
       T_world_odometry = u.T_world_odometry;
+      relocalization_pending = u.relocalization_pending;
       vo.setMapKeyframes(backend.keyframesNear(r.keyframe->id));
       loop_ms.push_back(u.loop.time_ms);
       if (u.optimized) {
@@ -334,6 +341,7 @@ int main(int argc, char** argv) {
     // Blank frames carry no information; they are left out of the trajectories.
     if (!blank) {
       if (keyframes.empty()) continue;
+      if (relocalization_pending) ++frames_awaiting_relocalization;
       trajectory.addFrame(r);
       frames_online.push_back({utimeToSeconds(r.utime), T_world_odometry * r.T_world_camera});
     }
@@ -368,6 +376,8 @@ int main(int argc, char** argv) {
   report.set("relocalizations_count", backend.numRelocalizations());
   report.set("relocalization_attempts_count", relocalization_attempts);
   report.set("map_keyframe_reuses_count", map_keyframe_reuses);
+  report.set("relocalization_keyframes_count", relocalization_keyframes);
+  report.set("frames_awaiting_relocalization_count", frames_awaiting_relocalization);
   report.set("graph_nodes_count", static_cast<double>(backend.graph().numNodes()));
   report.set("graph_edges_count", static_cast<double>(backend.graph().numEdges()));
   report.setLatencySamples("optimization", optimisation_ms);
@@ -380,6 +390,10 @@ int main(int argc, char** argv) {
       spec.c_str(), index, lost_frames, keyframes.size(), backend.numRelocalizations(),
       relocalization_attempts, backend.numLoops(), backend.numLocalEdges(),
       backend.graph().numNodes(), backend.graph().numEdges(), map_keyframe_reuses);
+  std::printf(
+      "%d frames posed while their segment awaited relocalisation; %d keyframes made early for "
+      "it\n",
+      frames_awaiting_relocalization, relocalization_keyframes);
   report.set("optimization_iterations_mean", mean(iterations));
   report.setLatencySamples("backend_cpu", backend_cpu_ms);
   std::printf("back end per keyframe (thread CPU): %.1f ms mean, %.1f ms p95, %.1f ms max\n",

@@ -542,8 +542,9 @@ void SlamDaemon::Impl::buildSteps(LcmBus& bus, DaemonPublisher& publisher) {
   s.capture.emplace(*source, static_cast<std::int64_t>(daemon.heartbeat_period_s * 1e9),
                     std::move(republish));
   // The back end's keyframes near the newest go back to tracking, which re-uses them instead of
-  // adding keyframes where the map already has the view.
-  const bool send_map_keyframes = backend && tracking_config.map_keyframes;
+  // adding keyframes where the map already has the view (tracking.map_keyframes), and learns
+  // whether its segment still awaits relocalisation.
+  const bool send_map_keyframes = backend != nullptr;
   s.tracking.emplace(tracking_config, send_map_keyframes ? &s.map_keyframes : nullptr);
   if (session) {
     // The run's keyframes and segments continue the session's numbering.
@@ -762,6 +763,7 @@ void SlamDaemon::Impl::summarize(const std::vector<StageStats>& stats,
   summary.prior_disagreements = steps->tracking->priorDisagreements();
   summary.dense_aligned_frames = steps->tracking->denseAlignedFrames();
   summary.map_keyframe_reuses = steps->tracking->mapKeyframeReuses();
+  summary.relocalization_keyframes = steps->tracking->relocalizationKeyframes();
   summary.longest_loss_s = tally.longest_loss_s;
   summary.tracking_lost_at_end = tally.loss_start_utime.load() >= 0;
   summary.capture_gaps = tally.capture_gaps;
@@ -957,6 +959,8 @@ bool SlamDaemon::Impl::writeMetrics(const std::vector<StageStats>& stats) {
   json.key("prior_disagreements").value(static_cast<std::int64_t>(summary.prior_disagreements));
   json.key("dense_aligned_frames").value(static_cast<std::int64_t>(summary.dense_aligned_frames));
   json.key("map_keyframe_reuses").value(static_cast<std::int64_t>(summary.map_keyframe_reuses));
+  json.key("relocalization_keyframes")
+      .value(static_cast<std::int64_t>(summary.relocalization_keyframes));
   json.key("longest_loss_s").value(summary.longest_loss_s);
   json.key("tracking_lost_at_end").value(summary.tracking_lost_at_end);
   json.key("capture_gaps").value(static_cast<std::int64_t>(summary.capture_gaps));

@@ -132,6 +132,9 @@ std::optional<TrackedPacket> TrackingStep::process(CapturePacket packet) {
     if (out.odometry->stats.used_map_keyframe) {
       map_keyframe_reuses_.fetch_add(1, std::memory_order_relaxed);
     }
+    if (out.odometry->stats.relocalization_keyframe) {
+      relocalization_keyframes_.fetch_add(1, std::memory_order_relaxed);
+    }
     tracking_state_.store(static_cast<int>(out.odometry->tracking_state),
                           std::memory_order_relaxed);
     implausible_estimates_.fetch_add(

@@ -225,6 +225,7 @@ MapKeyframes Backend::keyframesNear(std::int64_t anchor_id, double max_translati
   if (anchor == keyframes_.end() || !hasKeyframe(anchor_id)) return near;
   near.anchor_id = anchor_id;
   const std::int64_t map = segmentRoot(anchor->second.segment);
+  near.relocalization_pending = config_.relocalization && map != segmentRoot(first_segment_);
   const SE3 T_anchor_world = pose(anchor_id).inverse();
   struct Candidate {
     double distance = 0.0;  ///< translation and rotation, each over its bound

@@ -145,6 +145,20 @@ const ConfigSchema<TrackingConfig>& TrackingConfig::schema() {
           .number("relocalization_min_inliers", &C::relocalization_min_inliers, 3, 100000, "",
                   "inliers a match against a keyframe needs to relocalise after LOST (the pose "
                   "must also be within the motion limits since the last measured frame)")
+          .number("relocalization_keyframe_interval_s", &C::relocalization_keyframe_interval_s, 0.0,
+                  3600.0, "s",
+                  "while the back end has not placed the segment in its map, a frame whose view "
+                  "changed (relocalization_keyframe_novelty) becomes a keyframe, and so a "
+                  "relocalisation attempt, this long after the last keyframe; each further one "
+                  "of the segment waits twice as long (0 = only the usual keyframes)")
+          .number("relocalization_keyframe_max_interval_s",
+                  &C::relocalization_keyframe_max_interval_s, 0.0, 3600.0, "s",
+                  "the longest such a wait grows (a segment that never joins the map then adds "
+                  "at most one keyframe this often for relocalisation)")
+          .number("relocalization_keyframe_novelty", &C::relocalization_keyframe_novelty, 0.0, 1.0,
+                  "fraction",
+                  "how far the view must have changed for such a keyframe, as a fraction of the "
+                  "keyframe bounds (distance, rotation, and lost overlap)")
           .number("failure_sigma_scale", &C::failure_sigma_scale, 1.0, 1e6, "",
                   "covariance inflation of a predicted (failed) frame relative to the last good "
                   "frame's")

@@ -211,6 +211,8 @@ void VisualOdometry::reset() {
   keyframe_.reset();
   recent_keyframes_.clear();
   map_keyframes_ = MapKeyframes();
+  last_keyframe_made_utime_ = 0;
+  relocalization_keyframes_made_ = 0;
   local_map_.clear();
   prev_features_.reset();
   prev_tracked_ = false;
@@ -845,6 +847,8 @@ OdometryResult VisualOdometry::startSegment(OdometryResult res, const CurrentFra
   if (state_ == TrackingState::kLost) ++segment_;
   const SE3 T_world_curr = T_world_prev_;
   keyframe_ = makeKeyframe(curr, frame, frame_ptr, T_world_curr);
+  last_keyframe_made_utime_ = frame.utime;
+  relocalization_keyframes_made_ = 0;
   recent_keyframes_.clear();
   recent_keyframes_.push_back(keyframe_);
   local_map_.clear();
@@ -987,7 +991,7 @@ VisualOdometry::ReferenceMeasurement VisualOdometry::measureAgainstReference(
 }
 
 bool VisualOdometry::needsNewKeyframe(const TrackAttempt& attempt, const Keyframe& kf,
-                                      int features_with_depth) const {
+                                      int features_with_depth, double novelty) const {
   const double overlap =
       static_cast<double>(attempt.num_inliers) / std::max(1, kf.features.num_with_depth);
   const double translation_m = attempt.T_ref_curr.translation().norm();
@@ -999,12 +1003,36 @@ bool VisualOdometry::needsNewKeyframe(const TrackAttempt& attempt, const Keyfram
     max_translation_m =
         std::min(max_translation_m, config_.keyframe_max_baseline_ratio * kf.median_depth_m);
   }
+  max_translation_m *= novelty;
+  const double max_rotation_deg = novelty * config_.keyframe_max_rotation_deg;
+  const double min_overlap = 1.0 - novelty * (1.0 - config_.keyframe_min_overlap);
   // Few inliers call for a keyframe only when the frame has many more features to offer: where
   // the scene has few (a plain corridor), a new keyframe would hold no more than the old one.
   const bool few_inliers = attempt.num_inliers < config_.keyframe_min_inliers &&
                            features_with_depth >= 2 * attempt.num_inliers;
-  return few_inliers || overlap < config_.keyframe_min_overlap ||
-         translation_m > max_translation_m || rotation_deg > config_.keyframe_max_rotation_deg;
+  return few_inliers || overlap < min_overlap || translation_m > max_translation_m ||
+         rotation_deg > max_rotation_deg;
+}
+
+bool VisualOdometry::wantsRelocalizationKeyframe(const TrackAttempt& attempt,
+                                                 const CurrentFrame& curr, Utime utime) const {
+  if (config_.relocalization_keyframe_interval_s <= 0.0 || !map_keyframes_.relocalization_pending) {
+    return false;
+  }
+  // The flag is about the anchor's segment; after another loss it no longer applies.
+  const Keyframe* anchor = recentKeyframe(map_keyframes_.anchor_id);
+  if (anchor == nullptr || anchor->segment != segment_) return false;
+  // The same view would give the back end the same answer, and a segment that never joins the
+  // map (a new place, a wrong map) must not fill the graph: the wait doubles with each attempt,
+  // up to a bound.
+  const double wait_s = std::min(std::ldexp(config_.relocalization_keyframe_interval_s,
+                                            std::min(relocalization_keyframes_made_, 30)),
+                                 std::max(config_.relocalization_keyframe_max_interval_s,
+                                          config_.relocalization_keyframe_interval_s));
+  if (static_cast<double>(utime - last_keyframe_made_utime_) * 1e-6 < wait_s) return false;
+  return curr.features->num_with_depth >= config_.keyframe_min_inliers &&
+         needsNewKeyframe(attempt, *keyframe_, curr.features->num_with_depth,
+                          config_.relocalization_keyframe_novelty);
 }
 
 bool VisualOdometry::reuseRecentKeyframe(const CurrentFrame& curr, TrackAttempt& attempt,
@@ -1102,7 +1130,8 @@ const Keyframe* VisualOdometry::recentKeyframe(std::int64_t id) const {
 }
 
 void VisualOdometry::setMapKeyframes(MapKeyframes map_keyframes) {
-  if (config_.map_keyframes) map_keyframes_ = std::move(map_keyframes);
+  if (!config_.map_keyframes) map_keyframes.members.clear();
+  map_keyframes_ = std::move(map_keyframes);
 }
 
 void VisualOdometry::refineInLocalWindow(const CurrentFrame& curr, TrackAttempt& attempt,
@@ -1333,6 +1362,7 @@ void VisualOdometry::addKeyframe(const CurrentFrame& curr, const RgbdFrame& fram
   keyframe_ = makeKeyframe(curr, frame, frame_ptr, T_world_curr);
   res.is_keyframe = true;
   res.keyframe = keyframe_;
+  last_keyframe_made_utime_ = frame.utime;
   addToWindow(keyframe_, curr_landmarks_);
 }
 
@@ -1414,7 +1444,15 @@ OdometryResult VisualOdometry::process(const RgbdFrame& frame, const RgbdFramePt
   bool new_keyframe = measured.from_previous ||
                       needsNewKeyframe(attempt, *keyframe_, curr.features->num_with_depth);
   bool keyframe_is_reference = !measured.from_previous;
-  if (new_keyframe && config_.keyframe_window > 1 &&
+  // A keyframe for relocalisation is wanted as a view of its own: no re-use.
+  const bool for_relocalization =
+      !new_keyframe && wantsRelocalizationKeyframe(attempt, curr, frame.utime);
+  if (for_relocalization) {
+    new_keyframe = true;
+    ++relocalization_keyframes_made_;
+    res.stats.relocalization_keyframe = true;
+  }
+  if (new_keyframe && !for_relocalization && config_.keyframe_window > 1 &&
       reuseRecentKeyframe(curr, attempt, !measured.from_previous, T_world_curr, res)) {
     new_keyframe = false;
     keyframe_is_reference = true;

@@ -375,6 +375,9 @@ KeyframePtr inNewSegment(const KeyframePtr& keyframe, std::int64_t segment,
 struct SegmentRun {
   double rms_after_m = 0.0;  ///< RMS position error of the new segment's corrected keyframes
   std::vector<BackendUpdate> updates;
+  /// What tracking is told with the keyframes near each new one: the segment awaits
+  /// relocalisation (MapKeyframes::relocalization_pending).
+  std::vector<bool> tracking_told_pending;
   int relocalizations = 0;
 };
 
@@ -397,6 +400,7 @@ SegmentRun runWithLostTracking(bool relocalization) {
         std::make_shared<Keyframe>(*inNewSegment(world.keyframes[k], 1, T_odometry_world, k == 44));
     kf->id = static_cast<std::int64_t>(50 + (k - 44));
     run.updates.push_back(backend.addKeyframe(kf));
+    run.tracking_told_pending.push_back(backend.keyframesNear(kf->id).relocalization_pending);
     if (run.updates.back().relocalized) ++run.relocalizations;
   }
   double sum = 0.0;
@@ -417,6 +421,7 @@ TEST(Backend, RelocalisationPutsANewTrackingSegmentBackIntoTheMap) {
   EXPECT_TRUE(run.updates[0].relocalization_attempted);
   EXPECT_FALSE(run.updates[0].relocalized);
   EXPECT_TRUE(run.updates[0].relocalization_pending);
+  EXPECT_TRUE(run.tracking_told_pending[0]);  // tracking offers more views sooner
   EXPECT_EQ(run.updates[0].relocalization_attempts, 1);
   EXPECT_TRUE(run.updates[1].relocalized);
   EXPECT_EQ(run.updates[1].relocalization_attempts, 2);
@@ -426,7 +431,9 @@ TEST(Backend, RelocalisationPutsANewTrackingSegmentBackIntoTheMap) {
   EXPECT_LT(run.updates[1].relocalization.match_id, 50);  // a keyframe of the first segment
   EXPECT_EQ(run.relocalizations, 1);
   // Once joined, no more attempts; T_world_odometry maps the segment's odometry into the map.
-  for (std::size_t u = 2; u < run.updates.size(); ++u) {
+  for (std::size_t u = 1; u < run.updates.size(); ++u) {
+    EXPECT_FALSE(run.tracking_told_pending[u]) << u;
+    if (u < 2) continue;
     EXPECT_FALSE(run.updates[u].relocalization_attempted);
     EXPECT_FALSE(run.updates[u].relocalization_pending);
   }
@@ -440,6 +447,8 @@ TEST(Backend, WithoutRelocalisationANewSegmentStaysInItsOwnWorld) {
   EXPECT_EQ(run.relocalizations, 0);
   for (const BackendUpdate& u : run.updates) EXPECT_FALSE(u.relocalization_attempted);
   EXPECT_TRUE(run.updates.back().relocalization_pending);
+  // No attempts will be made: tracking is not asked for views to attempt with.
+  for (const bool told : run.tracking_told_pending) EXPECT_FALSE(told);
   EXPECT_GT(run.rms_after_m, 1.0);
 }
 

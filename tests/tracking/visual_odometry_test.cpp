@@ -242,6 +242,87 @@ TEST(VisualOdometry, AfterALossAFrameThatSeesARecentKeyframeAgainIsRelocalisedIn
   EXPECT_EQ(r.segment, 1);
 }
 
+// The back end has not placed the segment in its map (after a loss, or a loaded session not yet
+// localised) and says so with each set of map keyframes: frames whose view changed become
+// keyframes sooner, at a wait that doubles with each one. step_m: the camera's motion along x per
+// frame (0: it stands still); pending_until: the frame from which the back end says the segment
+// is placed.
+struct RelocalizationKeyframes {
+  int keyframes = 0;
+  int relocalization_keyframes = 0;
+  /// Time since the keyframe before, for each keyframe made for relocalisation.
+  std::vector<double> waits_s;
+  int made_after_placed = 0;
+};
+
+RelocalizationKeyframes runAwaitingRelocalization(bool pending, double step_m,
+                                                  int pending_until = 1000,
+                                                  const TrackingConfig& config = TrackingConfig()) {
+  VisualOdometry vo(config);
+  const test::TexturedBox box({-2, -1.5, -1}, {2, 1.5, 3}, 42);
+  RelocalizationKeyframes out;
+  Utime last_keyframe_utime = 0;
+  std::int64_t last_keyframe_id = -1;
+  for (int i = 0; i < 90; ++i) {
+    if (i == pending_until) {
+      // The back end placed the segment with the last keyframe it got, and says so at once.
+      MapKeyframes placed;
+      placed.anchor_id = last_keyframe_id;
+      vo.setMapKeyframes(std::move(placed));
+    }
+    SE3 T_true = SE3::Identity();
+    T_true.translation().x() = step_m * i;
+    RgbdFrame frame = box.render(T_true, test::fr1Camera());
+    frame.utime = 1'000'000 + i * 33'333;
+    const OdometryResult r = vo.processFrame(frame);
+    EXPECT_EQ(r.status, OdometryStatus::kOk) << i;
+    EXPECT_LT(std::abs(r.T_world_camera.translation().x() - T_true.translation().x()), 0.005) << i;
+    if (!r.is_keyframe) continue;
+    ++out.keyframes;
+    if (r.stats.relocalization_keyframe) {
+      ++out.relocalization_keyframes;
+      out.waits_s.push_back(static_cast<double>(r.utime - last_keyframe_utime) * 1e-6);
+      if (i >= pending_until) ++out.made_after_placed;
+    }
+    last_keyframe_utime = r.utime;
+    last_keyframe_id = r.keyframe->id;
+    MapKeyframes map;
+    map.anchor_id = r.keyframe->id;
+    map.relocalization_pending = pending && i < pending_until;
+    vo.setMapKeyframes(std::move(map));
+  }
+  return out;
+}
+
+TEST(VisualOdometry, WhileTheSegmentAwaitsRelocalisationAChangedViewBecomesAKeyframeSooner) {
+  const RelocalizationKeyframes usual = runAwaitingRelocalization(false, 0.01);
+  const RelocalizationKeyframes awaiting = runAwaitingRelocalization(true, 0.01);
+  std::printf("3 s at 0.3 m/s: %d keyframes, %d awaiting relocalisation (%d made for it)\n",
+              usual.keyframes, awaiting.keyframes, awaiting.relocalization_keyframes);
+  ASSERT_EQ(TrackingConfig().relocalization_keyframe_interval_s, 0.25);
+  EXPECT_EQ(usual.relocalization_keyframes, 0);
+  ASSERT_GE(awaiting.relocalization_keyframes, 2);
+  EXPECT_GT(awaiting.keyframes, usual.keyframes);
+  // The k-th waited at least 0.25 s * 2^(k-1) since the keyframe before it.
+  for (std::size_t k = 0; k < awaiting.waits_s.size(); ++k) {
+    EXPECT_GE(awaiting.waits_s[k], std::ldexp(0.25, static_cast<int>(k)) - 1e-6) << k;
+  }
+  // The wait grows up to its bound, then stays.
+  TrackingConfig bounded;
+  bounded.relocalization_keyframe_max_interval_s = 0.5;
+  const RelocalizationKeyframes steady = runAwaitingRelocalization(true, 0.01, 1000, bounded);
+  EXPECT_GT(steady.relocalization_keyframes, awaiting.relocalization_keyframes);
+  for (std::size_t k = 0; k < steady.waits_s.size(); ++k) {
+    EXPECT_GE(steady.waits_s[k], std::min(std::ldexp(0.25, static_cast<int>(k)), 0.5) - 1e-6) << k;
+  }
+  // Once the back end says the segment is placed, only the usual keyframes.
+  const RelocalizationKeyframes placed = runAwaitingRelocalization(true, 0.01, 20);
+  EXPECT_EQ(placed.made_after_placed, 0);
+  // A camera standing still offers the back end nothing new: no keyframes at all.
+  const RelocalizationKeyframes still = runAwaitingRelocalization(true, 0.0);
+  EXPECT_EQ(still.keyframes, 1);
+}
+
 // The camera goes 1.2 m along x and comes back. Tracking keeps only its last 2 keyframes, so on
 // the way back the keyframes of the start have left its window; the map still has them (here:
 // every keyframe made, at its true pose, as a back end that has optimised well holds them).

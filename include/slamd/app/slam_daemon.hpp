@@ -76,6 +76,9 @@ struct DaemonSummary {
   /// Frames that took one of the back end's keyframes as reference where tracking would have
   /// made a keyframe (tracking.map_keyframes).
   std::uint64_t map_keyframe_reuses = 0;
+  /// Keyframes made early because the segment awaited relocalisation in the back end's map
+  /// (tracking.relocalization_keyframe_*).
+  std::uint64_t relocalization_keyframes = 0;
   double longest_loss_s = 0.0;        ///< longest run of predicted or lost poses, frame time
   bool tracking_lost_at_end = false;  ///< the last published pose was not measured
   // Gaps in the camera's frames (more than 0.5 s of capture time between two poses: a camera

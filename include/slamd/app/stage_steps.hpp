@@ -220,6 +220,10 @@ class TrackingStep : public StepBase {
   std::uint64_t mapKeyframeReuses() const {
     return map_keyframe_reuses_.load(std::memory_order_relaxed);
   }
+  /// Keyframes made early for the back end to relocalise the segment (any thread).
+  std::uint64_t relocalizationKeyframes() const {
+    return relocalization_keyframes_.load(std::memory_order_relaxed);
+  }
 
  private:
   VisualOdometry odometry_;
@@ -229,6 +233,7 @@ class TrackingStep : public StepBase {
   std::atomic<std::uint64_t> prior_disagreements_{0};
   std::atomic<std::uint64_t> dense_aligned_frames_{0};
   std::atomic<std::uint64_t> map_keyframe_reuses_{0};
+  std::atomic<std::uint64_t> relocalization_keyframes_{0};
 };
 
 // --- steps parallel to tracking (vanishing points, plane segmentation) --------------------------

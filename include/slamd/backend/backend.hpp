@@ -80,8 +80,11 @@
 // segments (LoopDetector::query, no recency exclusion or consistency). On a verified match a
 // strong edge joins the segment to the map, the graph is re-optimised and the update says
 // relocalized; T_world_odometry then carries the new segment's odometry into the map's world.
-// Until a match is found every later keyframe of the segment tries again. A segment's keyframes
-// make local edges only with keyframes of segments already joined to it.
+// Until a match is found every later keyframe of the segment tries again; keyframesNear() says
+// the segment awaits relocalisation (MapKeyframes::relocalization_pending), and tracking then
+// makes keyframes of changed views sooner than its usual ones, so that attempts come as soon as a
+// frame allows. A segment's keyframes make local edges only with keyframes of segments already
+// joined to it.
 
 #include <cstdint>
 #include <memory>

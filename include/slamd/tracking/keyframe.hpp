@@ -39,6 +39,10 @@ struct MapKeyframes {
   };
   std::int64_t anchor_id = -1;  ///< -1: none
   std::vector<Member> members;  ///< nearest first
+  /// The anchor's segment is not yet placed in the map (after a loss, or in a loaded session
+  /// before the first relocalisation): each keyframe of it the keeper gets is a relocalisation
+  /// attempt. members then holds keyframes of that segment only.
+  bool relocalization_pending = false;
 };
 
 /// What the back end keeps of a keyframe: a copy without the frame's images and without the

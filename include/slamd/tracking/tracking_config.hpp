@@ -111,6 +111,17 @@ struct TrackingConfig {
   // comes back to what it saw before the loss continues in the same world frame at once.
   int relocalization_keyframes = 3;
   int relocalization_min_inliers = 50;
+  // While the back end has not yet placed the current segment in its map (after a loss, or at the
+  // start of a run in a loaded session), every keyframe it gets is a relocalisation attempt. A
+  // frame whose view has changed by relocalization_keyframe_novelty of what makes a keyframe then
+  // becomes one, so that the attempts follow the view rather than the slower keyframe rate; the
+  // first may come relocalization_keyframe_interval_s after the last keyframe, and each further
+  // one of the segment waits twice as long as the one before, up to
+  // relocalization_keyframe_max_interval_s, so that a segment that never joins the map (a new
+  // place, a wrong map) adds few keyframes for it.
+  double relocalization_keyframe_interval_s = 0.25;
+  double relocalization_keyframe_max_interval_s = 2.0;
+  double relocalization_keyframe_novelty = 0.5;
   double failure_sigma_scale = 10.0;
 
   // --- Dense alignment where features fail (dense_alignment.hpp) ------------------------------

@@ -68,6 +68,9 @@ struct OdometryStats {
   bool used_previous_frame = false;  ///< the keyframe failed; tracked from the previous frame
   /// A keyframe of the map (setMapKeyframes) became the reference instead of a new keyframe.
   bool used_map_keyframe = false;
+  /// The frame became a keyframe early because its segment awaits relocalisation in the map
+  /// (tracking.relocalization_keyframe_*).
+  bool relocalization_keyframe = false;
   int implausible_estimates = 0;  ///< estimates vetoed by the motion limits (then retried)
   int prior_disagreements = 0;    ///< estimates rejected by the motion prior's gate (then retried)
   int local_map_landmarks = 0;    ///< landmarks of covisible keyframes searched (local_map)
@@ -136,7 +139,9 @@ class VisualOdometry {
   /// The keyframes the map (the back end) keeps near one of tracking's recent keyframes, the
   /// anchor: when a frame calls for a new keyframe, the nearest of these and of tracking's own
   /// recent keyframes are tried first (tracking.map_keyframes). Replaces the previous set; a set
-  /// whose anchor has left tracking's window is not used.
+  /// whose anchor has left tracking's window is not used. While the set says the anchor's segment
+  /// is not yet placed in the map, frames whose view changed become keyframes sooner
+  /// (tracking.relocalization_keyframe_*), each one a relocalisation attempt for the back end.
   void setMapKeyframes(MapKeyframes map_keyframes);
 
   const TrackingConfig& config() const { return config_; }
@@ -182,9 +187,15 @@ class VisualOdometry {
   /// Counts a rejected estimate in stats; true if it was rejected (implausible or disagreeing).
   bool rejected(const SE3& T_world_curr, const Matrix6d& covariance, const SE3& T_world_pred,
                 double dt_s, OdometryStats& stats) const;
-  /// features_with_depth: the current frame's.
-  bool needsNewKeyframe(const TrackAttempt& attempt, const Keyframe& kf,
-                        int features_with_depth) const;
+  /// features_with_depth: the current frame's. novelty scales the bounds: 1 for the usual
+  /// keyframes, smaller for a view that has changed less (relocalization_keyframe_novelty).
+  bool needsNewKeyframe(const TrackAttempt& attempt, const Keyframe& kf, int features_with_depth,
+                        double novelty = 1.0) const;
+  /// Whether a frame measured by attempt against keyframe_ (at utime, not otherwise a keyframe)
+  /// should become one for the back end to relocalise: its segment not yet placed in the map
+  /// (MapKeyframes::relocalization_pending), the view changed, the interval passed.
+  bool wantsRelocalizationKeyframe(const TrackAttempt& attempt, const CurrentFrame& curr,
+                                   Utime utime) const;
   /// Measures against a recent or map keyframe near T_world_curr instead of making a new one;
   /// true (and attempt, T_world_curr and res updated) when one was good enough. attempt: the
   /// measurement against keyframe_ when keyframe_was_reference.
@@ -273,6 +284,9 @@ class VisualOdometry {
   KeyframePtr keyframe_;
   std::deque<KeyframePtr> recent_keyframes_;  ///< the last keyframe_window keyframes (segment)
   MapKeyframes map_keyframes_;                ///< setMapKeyframes()
+  Utime last_keyframe_made_utime_ = 0;        ///< the newest keyframe this object made
+  /// Keyframes made for relocalisation in the current segment (wantsRelocalizationKeyframe).
+  int relocalization_keyframes_made_ = 0;
   /// The landmarks of recent_keyframes_.
   LocalMap local_map_;
   /// The landmark each feature of the current frame was matched to (-1: none); the associations
