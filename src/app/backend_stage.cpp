@@ -185,6 +185,7 @@ BackendCorrection BackendStage::makeCorrection(const BackendUpdate& update, Utim
   correction.keyframe_poses = update.corrected_poses;
   correction.relocalized = update.relocalized;
   correction.map_frame_known = backend_->newestKeyframeInMap();
+  correction.newest_segment = backend_->newestKeyframeSegment();
   KeyframeTrajectory& trajectory = correction.trajectory;
   trajectory.utime = utime;
   trajectory.sequence = sequence_++;

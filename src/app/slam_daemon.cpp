@@ -433,9 +433,10 @@ void SlamDaemon::Impl::publishStatus(LcmBus& bus, StatusBuilder& builder, Pipeli
   }
   if (not_localized) {
     extras.message += (extras.message.empty() ? "" : "; ") +
-                      std::string(
-                          "not yet localised in the loaded session's map: poses are in "
-                          "this run's own frame");
+                      std::string(session ? "not yet localised in the loaded session's map: poses "
+                                            "are in this run's own frame"
+                                          : "not yet relocalised in the map after the loss: "
+                                            "poses are relative to where the loss left them");
   }
   const std::string loss = steps->publish->stats().lossNote();
   if (!loss.empty()) extras.message += (extras.message.empty() ? "" : "; ") + loss;
@@ -759,6 +760,7 @@ void SlamDaemon::Impl::summarize(const std::vector<StageStats>& stats,
   summary.poses_lost = tally.lost.load();
   summary.poses_not_initialized = tally.not_initialized.load();
   summary.poses_not_localized = tally.not_localized.load();
+  summary.not_localized_at_end = tally.awaiting_map_frame.load();
   summary.implausible_estimates = steps->tracking->implausibleEstimates();
   summary.prior_disagreements = steps->tracking->priorDisagreements();
   summary.dense_aligned_frames = steps->tracking->denseAlignedFrames();
@@ -955,6 +957,10 @@ bool SlamDaemon::Impl::writeMetrics(const std::vector<StageStats>& stats) {
   json.key("poses_tracked").value(static_cast<std::int64_t>(summary.poses_tracked));
   json.key("poses_predicted").value(static_cast<std::int64_t>(summary.poses_predicted));
   json.key("poses_lost").value(static_cast<std::int64_t>(summary.poses_lost));
+  // Poses not (yet) in the map's frame: a loaded session's before the first relocalisation, and
+  // those after a loss until the back end joined the new segment to the map.
+  json.key("poses_not_localized").value(static_cast<std::int64_t>(summary.poses_not_localized));
+  json.key("not_localized_at_end").value(summary.not_localized_at_end);
   json.key("implausible_estimates").value(static_cast<std::int64_t>(summary.implausible_estimates));
   json.key("prior_disagreements").value(static_cast<std::int64_t>(summary.prior_disagreements));
   json.key("dense_aligned_frames").value(static_cast<std::int64_t>(summary.dense_aligned_frames));

@@ -259,12 +259,15 @@ PublishStep::PublishStep(DaemonPublisher& publisher, std::string world_frame,
     : publisher_(publisher),
       world_frame_(std::move(world_frame)),
       camera_frame_(std::move(camera_frame)),
-      corrections_(corrections) {}
+      corrections_(corrections),
+      with_back_end_(corrections != nullptr) {}
 
 void PublishStep::reset() {
   correction_ = SE3::Identity();
   corrected_ = false;
   awaiting_map_frame_ = localizes_in_loaded_map_;
+  current_segment_ = -1;
+  newest_segment_in_map_ = -1;
 }
 
 void PublishStep::awaitMapFrame() {
@@ -277,10 +280,20 @@ void PublishStep::process(EstimatedPacket packet) {
   corrections_.take(resetEpoch(), [this](PoseCorrection correction) {
     correction_ = correction.T_world_uncorrected;
     relocalized_ = relocalized_ || correction.relocalized;
-    if (correction.map_frame_known) awaiting_map_frame_ = false;
+    if (correction.map_frame_known) {
+      newest_segment_in_map_ = std::max(newest_segment_in_map_, correction.segment);
+    }
     corrected_ = true;
   });
   if (!packet.frame || !packet.odometry) return;
+  if (with_back_end_) {
+    // The run's first segment defines the map's frame, unless a loaded session's map does.
+    if (current_segment_ < 0 && !localizes_in_loaded_map_) {
+      newest_segment_in_map_ = packet.odometry->segment;
+    }
+    current_segment_ = packet.odometry->segment;
+    awaiting_map_frame_ = current_segment_ > newest_segment_in_map_;
+  }
   PoseEstimate pose = packet.pose;
   if (corrected_) {
     pose = transformedPose(pose, correction_);
@@ -294,7 +307,7 @@ void PublishStep::process(EstimatedPacket packet) {
   pose.child_frame = camera_frame_;
   tally_.record(pose.tracking_state, pose.utime);
   tally_.awaiting_map_frame.store(awaiting_map_frame_, std::memory_order_relaxed);
-  // Not yet in the loaded map's frame: said on every pose that has one (a lost pose says lost).
+  // Not yet in the map's frame: said on every pose that has one (a lost pose says lost).
   if (awaiting_map_frame_ && pose.tracking_state != TrackingState::kLost &&
       pose.tracking_state != TrackingState::kNotInitialized) {
     pose.tracking_state = TrackingState::kNotLocalized;
@@ -663,9 +676,10 @@ void BackendStep::process(const EstimatedPacket& packet) {
   if (!correction) return;
   correction->trajectory.frame_id = world_frame_;
   publisher_.publishKeyframes(correction->trajectory);
-  if (pose_corrections_ && !pose_corrections_->tryPush(PoseCorrection{
-                               correction->T_world_uncorrected, correction->relocalized,
-                               correction->map_frame_known, resetEpoch()})) {
+  if (pose_corrections_ &&
+      !pose_corrections_->tryPush(
+          PoseCorrection{correction->T_world_uncorrected, correction->relocalized,
+                         correction->map_frame_known, resetEpoch(), correction->newest_segment})) {
     // Cannot happen while the publish step keeps up (it drains on every frame); if it does,
     // the next correction replaces this one anyway.
     SLAMD_LOG_WARN(kLog) << "pose correction not handed to the publish step: queue full";

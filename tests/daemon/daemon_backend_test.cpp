@@ -73,6 +73,7 @@ TEST_F(DaemonWithBackEnd, ClosingTheLoopOfARoomLapReducesTrajectoryError) {
   EXPECT_GE(slam.summary.loops, 1) << "the return to the start of the lap was not recognised";
   EXPECT_GE(slam.summary.optimizations, 1);
   EXPECT_EQ(slam.summary.relocalizations, 0) << "tracking was never lost on this lap";
+  EXPECT_EQ(slam.summary.poses_not_localized, 0u) << "every pose is in the map's frame";
   EXPECT_LT(slam.end_error_m, 0.6 * odometry.end_error_m)
       << "drift at the end of the lap: " << slam.end_error_m << " m with the back end, "
       << odometry.end_error_m << " m without";
@@ -98,8 +99,15 @@ TEST_F(DaemonWithBackEnd, AfterTheLensIsCoveredTrackingResumesInTheSameMap) {
   // The camera moves about 0.8 m during the blackout: a segment left where tracking lost it
   // would be off by that much. Measured when written: 0.011 m.
   EXPECT_LT(slam.ate_rmse_m, 0.03);
-  std::printf("room lap with a 1 s blackout: %lld relocalisations, ATE %.4f m\n",
-              static_cast<long long>(slam.summary.relocalizations), slam.ate_rmse_m);
+  // Between the new segment's first pose and the correction that put it back, the poses were
+  // published as not in the map's frame; none after.
+  EXPECT_GE(slam.summary.poses_not_localized, 1u);
+  EXPECT_FALSE(slam.summary.not_localized_at_end);
+  std::printf(
+      "room lap with a 1 s blackout: %lld relocalisations, ATE %.4f m; %llu poses published "
+      "TRACKING_NOT_LOCALIZED before\n",
+      static_cast<long long>(slam.summary.relocalizations), slam.ate_rmse_m,
+      static_cast<unsigned long long>(slam.summary.poses_not_localized));
 }
 
 // daemon.memory_limit_mb far below what the run needs: the daemon degrades instead of failing.

@@ -196,6 +196,59 @@ TEST_F(DaemonStageSteps, MappingPutsKeyframePlanesInAPlaneMapThatFollowsCorrecti
   EXPECT_GE(publisher.plane_maps.size(), published + 1);
 }
 
+// With a back end, a tracking segment started after a loss is not in the map's frame until the
+// back end says it joined it: its poses are published TRACKING_NOT_LOCALIZED until then, the first
+// after says TRACKING_RELOCALIZED. A correction about an older segment's keyframe does not count.
+TEST(PublishStepSegments, APoseAfterALossIsNotLocalisedUntilACorrectionPutsItsSegmentInTheMap) {
+  RecordingPublisher publisher;
+  SpscQueue<PoseCorrection> corrections(8);
+  PublishStep publish(publisher, "world", "camera", &corrections);
+  Utime utime = 1'000'000;
+  const auto publishFrame = [&](PublishStep& step, std::int64_t segment, TrackingState state) {
+    EstimatedPacket packet;
+    auto frame = std::make_shared<RgbdFrame>();
+    frame->utime = (utime += 33'333);
+    frame->received_steady_ns = steadyNowNs();
+    packet.frame = frame;
+    OdometryResult odometry;
+    odometry.utime = frame->utime;
+    odometry.segment = segment;
+    packet.odometry = odometry;
+    packet.pose.utime = frame->utime;
+    packet.pose.tracking_state = state;
+    step.process(std::move(packet));
+    return publisher.poses.back().tracking_state;
+  };
+  const auto correction = [&](bool relocalized, bool map_frame_known, std::int64_t segment) {
+    ASSERT_TRUE(corrections.tryPush(
+        PoseCorrection{SE3::Identity(), relocalized, map_frame_known, 0, segment}));
+  };
+  using S = TrackingState;
+  EXPECT_EQ(publishFrame(publish, 3, S::kOk), S::kOk);  // the run's first segment: the map's
+  correction(false, true, 3);
+  EXPECT_EQ(publishFrame(publish, 3, S::kOk), S::kOk);
+  EXPECT_EQ(publishFrame(publish, 3, S::kLost), S::kLost);
+  EXPECT_EQ(publishFrame(publish, 4, S::kOk), S::kNotLocalized);  // after the loss
+  correction(false, true, 3);  // late, about the last keyframe before the loss
+  EXPECT_EQ(publishFrame(publish, 4, S::kOk), S::kNotLocalized);
+  correction(false, false, 4);  // the new segment's keyframes optimised, not yet joined
+  EXPECT_EQ(publishFrame(publish, 4, S::kPredicted), S::kNotLocalized);
+  correction(true, true, 4);  // relocalised
+  EXPECT_EQ(publishFrame(publish, 4, S::kOk), S::kRelocalized);
+  EXPECT_EQ(publishFrame(publish, 4, S::kOk), S::kOk);
+  // Lost again, and the back end joined the next segment before this step saw its first frame.
+  EXPECT_EQ(publishFrame(publish, 4, S::kLost), S::kLost);
+  correction(true, true, 5);
+  EXPECT_EQ(publishFrame(publish, 5, S::kOk), S::kRelocalized);
+  EXPECT_EQ(publish.stats().not_localized.load(), 3u);
+  EXPECT_FALSE(publish.stats().awaiting_map_frame.load());
+
+  // Without a back end there is no map to be placed in: segments change nothing.
+  PublishStep odometry_only(publisher, "world", "camera", nullptr);
+  EXPECT_EQ(publishFrame(odometry_only, 0, S::kOk), S::kOk);
+  EXPECT_EQ(publishFrame(odometry_only, 1, S::kOk), S::kOk);
+}
+
 TEST_F(DaemonStageSteps, NoPacketFromBeforeAResetIsProcessedAfterAStageReset) {
   const FilterConfig filter_config = FilterConfig::load(config_);
   const MappingConfig mapping_config = MappingConfig::load(config_);

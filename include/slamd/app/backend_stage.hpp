@@ -46,9 +46,10 @@ struct BackendCorrection {
   /// The message for SLAMD_KEYFRAMES.
   KeyframeTrajectory trajectory;
   bool relocalized = false;  ///< a lost tracking segment was put back into the map
-  /// The newest keyframe is in the map's frame: false while the run's first segment has not
-  /// been relocalised into a loaded session's map.
+  /// The newest keyframe is in the map's frame: false while its tracking segment (the run's
+  /// first in a loaded session, or one after a loss) has not been relocalised into the map.
   bool map_frame_known = true;
+  std::int64_t newest_segment = -1;  ///< the newest keyframe's tracking segment
 };
 
 struct BackendStageStats {

@@ -63,8 +63,10 @@ struct DaemonSummary {
   std::uint64_t poses_lost = 0;
   std::uint64_t poses_not_initialized = 0;
   /// Poses published TRACKING_NOT_LOCALIZED: a session was loaded and the run had not yet been
-  /// relocalised in its map (counted in the states above too).
+  /// relocalised in its map, or after a loss the back end had not yet joined the new tracking
+  /// segment to the map (counted in the states above too).
   std::uint64_t poses_not_localized = 0;
+  bool not_localized_at_end = false;  ///< the last pose was published TRACKING_NOT_LOCALIZED
   /// With --session-in: frames tracked before the one whose keyframe localised the run in the
   /// loaded map (BackendStageStats::frames_before_localization); -1 when never localised.
   std::int64_t frames_before_localization = -1;

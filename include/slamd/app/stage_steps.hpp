@@ -369,10 +369,11 @@ class FilterStep : public StepBase {
 struct PoseCorrection {
   SE3 T_world_uncorrected = SE3::Identity();
   bool relocalized = false;  ///< mark the next published pose TRACKING_RELOCALIZED
-  /// The newest keyframe is in the map's frame (false while a loaded session's map has not been
-  /// relocalised into).
+  /// The newest keyframe is in the map's frame (false while its tracking segment, the first of a
+  /// run in a loaded session or one after a loss, has not been relocalised into the map).
   bool map_frame_known = true;
   std::uint64_t reset_epoch = 0;
+  std::int64_t segment = -1;  ///< the newest keyframe's tracking segment
 };
 
 /// Published poses by tracking state, and the current loss. Written by the publish step; the
@@ -383,9 +384,10 @@ struct TrackingTally {
   std::atomic<std::uint64_t> lost{0};
   std::atomic<std::uint64_t> not_initialized{0};
   /// Of the poses with an estimate, those published TRACKING_NOT_LOCALIZED (a loaded session's
-  /// map not yet relocalised into); counted in the states above too.
+  /// map, or after a loss the map of the run so far, not yet relocalised into); counted in the
+  /// states above too.
   std::atomic<std::uint64_t> not_localized{0};
-  /// The latest pose was not yet in a loaded session's map frame (any thread).
+  /// The latest pose was not yet in the map's frame (any thread).
   std::atomic<bool> awaiting_map_frame{false};
   /// Frame time of the first pose of the current loss (predicted or lost), -1 while tracking.
   std::atomic<Utime> loss_start_utime{-1};
@@ -410,6 +412,12 @@ struct TrackingTally {
 
 /// Applies the back end's correction to each filtered pose and publishes it (pose, odometry,
 /// vanishing point); keeps the published trajectory and the capture-to-pose latency.
+///
+/// With a back end (`corrections` given), a pose is in the map's frame only while its tracking
+/// segment is: the run's first segment is, unless a session was loaded (awaitMapFrame); a segment
+/// started after a loss is not until a correction says the back end joined it to the map
+/// (relocalisation, or a loop). Until then poses are published TRACKING_NOT_LOCALIZED: tracking
+/// works, but the pose is relative to where the loss left it.
 class PublishStep : public StepBase {
  public:
   PublishStep(DaemonPublisher& publisher, std::string world_frame, std::string camera_frame,
@@ -437,6 +445,11 @@ class PublishStep : public StepBase {
   bool relocalized_ = false;
   bool localizes_in_loaded_map_ = false;
   bool awaiting_map_frame_ = false;
+  bool with_back_end_ = false;
+  /// Tracking's current segment, and the newest one a correction put in the map's frame (-1:
+  /// none yet).
+  std::int64_t current_segment_ = -1;
+  std::int64_t newest_segment_in_map_ = -1;
   TrackingTally tally_;
   LatencyHistogram end_to_end_;
   Trajectory trajectory_;

@@ -214,6 +214,10 @@ class Backend {
   bool newestKeyframeInMap() const {
     return previous_ != nullptr && segmentRoot(previous_->segment) == segmentRoot(first_segment_);
   }
+  /// The tracking segment of the newest keyframe added (-1: none yet).
+  std::int64_t newestKeyframeSegment() const {
+    return previous_ != nullptr ? previous_->segment : -1;
+  }
   /// The segment whose map `segment` has been joined to (the segment itself until then).
   std::int64_t segmentRoot(std::int64_t segment) const;
 
