@@ -107,6 +107,9 @@ const ConfigSchema<TrackingConfig>& TrackingConfig::schema() {
                   "landmarks a keyframe must share with the current keyframe to be covisible")
           .number("local_map_max_matches", &C::local_map_max_matches, 10, 10000, "",
                   "local map matches kept for patch alignment and refinement (spread evenly)")
+          .flag("few_inliers_previous_frame", &C::few_inliers_previous_frame,
+                "a frame with fewer than keyframe_min_inliers inliers against its keyframe is "
+                "refined jointly with its matches against the previous frame (held at its pose)")
           .number("fovis_levels", &C::fovis_levels, 1, 5, "", "FOVIS pyramid levels")
           .number("fovis_fast_threshold", &C::fovis_fast_threshold, 5, 100, "grey levels",
                   "initial FAST threshold, adapted each frame towards max_features")

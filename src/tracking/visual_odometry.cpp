@@ -1155,6 +1155,23 @@ void VisualOdometry::refineInLocalWindow(const CurrentFrame& curr, TrackAttempt&
   T_world_curr = normalizedSE3(keyframe_->T_world_camera * attempt.T_ref_curr);
 }
 
+void VisualOdometry::refineWithPreviousFrame(const CurrentFrame& curr, TrackAttempt& attempt,
+                                             SE3& T_world_curr, OdometryResult& res) {
+  if (!config_.few_inliers_previous_frame || attempt.num_inliers >= config_.keyframe_min_inliers ||
+      !prev_tracked_ || !prev_features_ || keyframe_->utime == prev_utime_) {
+    return;
+  }
+  const double matching_ms = attempt.time_matching_ms;
+  const double motion_ms = attempt.time_motion_ms;
+  refineWithExtraReferences(keyframe_->T_world_camera, {{prev_features_.get(), T_world_prev_}},
+                            curr, attempt);
+  res.stats.time_matching_ms += attempt.time_matching_ms - matching_ms;
+  res.stats.time_motion_ms += attempt.time_motion_ms - motion_ms;
+  res.stats.refined_with_previous_frame = true;
+  res.T_ref_curr = attempt.T_ref_curr;
+  T_world_curr = normalizedSE3(keyframe_->T_world_camera * attempt.T_ref_curr);
+}
+
 void VisualOdometry::associateWithKeyframe(const TrackAttempt& attempt, const Keyframe& kf,
                                            std::vector<std::int64_t>& curr_landmarks) const {
   if (!local_map_.hasKeyframe(kf.id)) return;
@@ -1464,6 +1481,7 @@ OdometryResult VisualOdometry::process(const RgbdFrame& frame, const RgbdFramePt
   } else if (!measured.from_previous && config_.jointReferences() > 0) {
     refineInLocalWindow(curr, attempt, T_world_curr, res);
   }
+  if (keyframe_is_reference) refineWithPreviousFrame(curr, attempt, T_world_curr, res);
   // Re-using another keyframe or refining can move the estimate: the veto holds for the result.
   if (rejected(T_world_curr, attempt.covariance, T_world_pred, dt_s, res.stats)) {
     return fail(std::move(res), OdometryStatus::kImplausibleMotion, curr.features, t_start);

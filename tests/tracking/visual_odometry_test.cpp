@@ -242,6 +242,53 @@ TEST(VisualOdometry, AfterALossAFrameThatSeesARecentKeyframeAgainIsRelocalisedIn
   EXPECT_EQ(r.segment, 1);
 }
 
+// Few features (max_features 60), so every frame has fewer inliers against its keyframe than
+// keyframe_min_inliers, in a turn of 2 degrees a frame: each such frame is refined jointly with
+// its matches against the previous frame, and stays as accurate as without.
+struct FewInliersTurn {
+  int refined_with_previous = 0;
+  double max_rotation_error_deg = 0.0;
+  double max_translation_error_m = 0.0;
+};
+
+FewInliersTurn runFewInliersTurn(bool previous_frame) {
+  TrackingConfig config;
+  config.max_features = 60;
+  config.few_inliers_previous_frame = previous_frame;
+  VisualOdometry vo(config);
+  const test::TexturedBox box({-2, -1.5, -1}, {2, 1.5, 3}, 7);
+  FewInliersTurn out;
+  for (int i = 0; i < 30; ++i) {
+    SE3 T_true(Eigen::AngleAxisd(2.0 * i * M_PI / 180.0, Eigen::Vector3d::UnitY()));
+    T_true.translation() = Eigen::Vector3d(0.005 * i, 0.0, 0.0);
+    RgbdFrame frame = box.render(T_true, test::fr1Camera());
+    frame.utime = 1'000'000 + i * 33'333;
+    const OdometryResult r = vo.processFrame(frame);
+    EXPECT_EQ(r.status, OdometryStatus::kOk) << i;
+    if (r.stats.refined_with_previous_frame) ++out.refined_with_previous;
+    out.max_rotation_error_deg =
+        std::max(out.max_rotation_error_deg, rotationErrorDeg(r.T_world_camera, T_true));
+    out.max_translation_error_m =
+        std::max(out.max_translation_error_m,
+                 (r.T_world_camera.translation() - T_true.translation()).norm());
+  }
+  return out;
+}
+
+TEST(VisualOdometry, AFrameWithFewInliersIsRefinedWithThePreviousFrameToo) {
+  const FewInliersTurn with = runFewInliersTurn(true);
+  const FewInliersTurn without = runFewInliersTurn(false);
+  std::printf(
+      "few inliers, 2 deg a frame: %d frames refined with the previous one; worst error %.3f deg "
+      "%.4f m (without: %.3f deg %.4f m)\n",
+      with.refined_with_previous, with.max_rotation_error_deg, with.max_translation_error_m,
+      without.max_rotation_error_deg, without.max_translation_error_m);
+  EXPECT_GE(with.refined_with_previous, 10);
+  EXPECT_EQ(without.refined_with_previous, 0);
+  EXPECT_LT(with.max_rotation_error_deg, 0.3);
+  EXPECT_LT(with.max_translation_error_m, 0.01);
+}
+
 // The back end has not placed the segment in its map (after a loss, or a loaded session not yet
 // localised) and says so with each set of map keyframes: frames whose view changed become
 // keyframes sooner, at a wait that doubles with each one. step_m: the camera's motion along x per

@@ -83,6 +83,12 @@ struct TrackingConfig {
   int local_map_keyframes = 10;   ///< covisible keyframes whose landmarks are searched
   int local_map_min_shared = 10;  ///< landmarks a keyframe must share to be covisible
   int local_map_max_matches = 300;
+  /// A frame measured against its keyframe with fewer than keyframe_min_inliers inliers is refined
+  /// jointly with its matches against the previous frame (held at its pose). Far from the keyframe
+  /// in a fast turn, or facing one wall, few matches leave the estimate in a valley (a yaw and a
+  /// sideways slide look alike on one plane); the previous frame, a frame's motion away, shares
+  /// more of the view, and the frame would otherwise become a keyframe with that error.
+  bool few_inliers_previous_frame = true;
 
   // --- FOVIS front end ------------------------------------------------------------------------
   int fovis_levels = 3;

@@ -15,8 +15,9 @@
 // Per frame: features are extracted (with bucketing and undistortion), matched against the
 // current keyframe (guided by the constant-velocity prediction, or by descriptor over the whole
 // image when guidance fails), the motion is estimated by RANSAC + closed-form rigid fit (or a
-// maximum consistent clique for FOVIS) and refined robustly on SE(3). When the keyframe cannot be
-// tracked the previous frame is tried. A frame becomes a keyframe when inliers, overlap or motion
+// maximum consistent clique for FOVIS) and refined robustly on SE(3); with few inliers, jointly
+// with the matches against the previous frame. When the keyframe cannot be tracked the previous
+// frame is tried. A frame becomes a keyframe when inliers, overlap or motion
 // since the keyframe cross thresholds. When features cannot measure a frame (a plain wall, a fast
 // turn in front of it), dense alignment against the last measured frame does
 // (tracking.dense_fallback); such a frame with enough features becomes a keyframe. Frames nothing
@@ -71,6 +72,8 @@ struct OdometryStats {
   /// The frame became a keyframe early because its segment awaits relocalisation in the map
   /// (tracking.relocalization_keyframe_*).
   bool relocalization_keyframe = false;
+  /// Few inliers against the keyframe: refined jointly with the previous frame's matches.
+  bool refined_with_previous_frame = false;
   int implausible_estimates = 0;  ///< estimates vetoed by the motion limits (then retried)
   int prior_disagreements = 0;    ///< estimates rejected by the motion prior's gate (then retried)
   int local_map_landmarks = 0;    ///< landmarks of covisible keyframes searched (local_map)
@@ -205,6 +208,10 @@ class VisualOdometry {
   const Keyframe* recentKeyframe(std::int64_t id) const;
   void refineInLocalWindow(const CurrentFrame& curr, TrackAttempt& attempt, SE3& T_world_curr,
                            OdometryResult& res);
+  /// A measurement against keyframe_ with few inliers (tracking.few_inliers_previous_frame):
+  /// refined jointly with the matches against the previous measured frame, held at its pose.
+  void refineWithPreviousFrame(const CurrentFrame& curr, TrackAttempt& attempt, SE3& T_world_curr,
+                               OdometryResult& res);
   /// After LOST: measures the frame against the most recent keyframes (relocalization_*); true
   /// (keyframe_, T_world_curr and res's reference fields set) when one matched well enough at a
   /// pose the camera can have reached since the last measured frame.
