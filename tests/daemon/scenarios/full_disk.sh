@@ -19,10 +19,13 @@ cd "$WORK"
 mkdir -p disk
 mount -t tmpfs -o size=4m slamd-full-disk disk || fail "cannot mount a tmpfs"
 trap 'stop_background_jobs; umount -l "$WORK/disk" 2> /dev/null || true' EXIT
+# The mapping thread writes the snapshots: not niced, so that a machine loaded by other tests (and
+# the sanitizers) does not starve it before the run ends.
 "$SLAMD_BIN/slamd" --config "$SLAMD_SOURCE_DIR/config/synthetic.yaml" --log-level info \
   "${SMALL_CAMERA[@]}" --source synthetic:room --set synthetic.frames=450 \
   --set capture.pacing.mode=realtime --set mapping.snapshot_path="$WORK/disk/snapshot.bt" \
-  --set mapping.snapshot_period_s=1 --map-out "$WORK/disk/final.bt" 2> slamd.log &
+  --set mapping.snapshot_period_s=1 --set daemon.mapping_nice=0 \
+  --map-out "$WORK/disk/final.bt" 2> slamd.log &
 SLAMD_PID=$!
 wait_for 30 "the first snapshot" test -s disk/snapshot.bt
 sleep 0.2  # let the rename finish before hashing

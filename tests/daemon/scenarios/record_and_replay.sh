@@ -60,13 +60,15 @@ convert_octree exported.bt exported_check.ot > /dev/null || fail "exported.bt do
 grep -q '^[0-9]*,tracking,' status.csv || fail "status.csv has no tracking rows"
 check "slamd-export: $FRAMES poses equal to the pose log, a loadable map, $(($(wc -l < status.csv) - 1)) status rows"
 
-# Replay only the frames, at half speed, into a second slamd reading LCM.
+# Replay only the frames, at a quarter speed, into a second slamd reading LCM: a live source drops
+# a frame that arrives while tracking is busy, and under the sanitizers on a loaded machine
+# tracking can take longer than the half-speed period (it lost one of 90 frames so once).
 start_pose_log poses_replay.txt
 "$SLAMD_BIN/slamd" "${COMMON[@]}" --source lcm:SLAMD_FRAMES --trajectory-out trajectory_replay.txt &
 SLAMD_PID=$!
 wait_for 20 "the replay slamd to subscribe" "$SLAMD_BIN/slamd-status" --once --timeout 1 --log-level error
-lcm-logplayer -s 0.5 -e SLAMD_FRAMES run.lcmlog
-wait_for 20 "all $FRAMES replayed poses" has_poses poses_replay.txt $FRAMES
+lcm-logplayer -s 0.25 -e SLAMD_FRAMES run.lcmlog
+wait_for 30 "all $FRAMES replayed poses" has_poses poses_replay.txt $FRAMES
 kill -INT $SLAMD_PID
 wait $SLAMD_PID || fail "replay slamd exited with $?"
 stop_process $POSE_LOG_PID
