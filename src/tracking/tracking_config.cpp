@@ -110,6 +110,10 @@ const ConfigSchema<TrackingConfig>& TrackingConfig::schema() {
           .flag("few_inliers_previous_frame", &C::few_inliers_previous_frame,
                 "a frame with fewer than keyframe_min_inliers inliers against its keyframe is "
                 "refined jointly with its matches against the previous frame (held at its pose)")
+          .flag("few_inliers_dense", &C::few_inliers_dense,
+                "a frame with fewer than keyframe_min_inliers inliers is also aligned densely "
+                "against the previous measured frame, the feature estimate as the prior "
+                "(needs dense_fallback)")
           .number("fovis_levels", &C::fovis_levels, 1, 5, "", "FOVIS pyramid levels")
           .number("fovis_fast_threshold", &C::fovis_fast_threshold, 5, 100, "grey levels",
                   "initial FAST threshold, adapted each frame towards max_features")

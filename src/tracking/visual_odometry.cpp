@@ -1172,6 +1172,52 @@ void VisualOdometry::refineWithPreviousFrame(const CurrentFrame& curr, TrackAtte
   T_world_curr = normalizedSE3(keyframe_->T_world_camera * attempt.T_ref_curr);
 }
 
+void VisualOdometry::refineWithDenseAlignment(CurrentFrame& curr, const TrackAttempt& attempt,
+                                              const SE3& T_world_measured_ref,
+                                              bool keyframe_is_reference, SE3& T_world_curr,
+                                              OdometryResult& res) {
+  if (!config_.few_inliers_dense || attempt.num_inliers >= config_.keyframe_min_inliers ||
+      !config_.dense_fallback || dense_reference_.gray.empty() || curr.gray.empty() ||
+      dense_reference_.utime != last_measured_utime_ || dense_reference_.K.width != curr.K.width ||
+      dense_reference_.K.height != curr.K.height) {
+    return;
+  }
+  // Measured against the previous frame, that frame must be the one aligned against.
+  if (!keyframe_is_reference && res.ref_utime != dense_reference_.utime) return;
+  const std::int64_t t0 = steadyNowNs();
+  buildDensePyramids(curr);
+  // Against the keyframe, the feature estimate's uncertainty relative to the previous frame adds
+  // that of the chain from the keyframe to it; measured against the previous frame, it is its own.
+  const SE3& T_world_ref = dense_reference_.T_world_camera;
+  const SE3 T_ref_curr_features = T_world_ref.inverse() * T_world_curr;
+  const Matrix6d prior = keyframe_is_reference
+                             ? chainedCovariance(T_ref_curr_features, attempt.covariance)
+                             : attempt.covariance;
+  const DenseAlignmentResult dense = alignDense(*dense_reference_.pyramid, *curr.pyramid,
+                                                T_ref_curr_features, prior, dense_options_);
+  res.stats.time_dense_ms += msSince(t0);
+  if (!dense.success) return;
+  // Two measurements that disagree by far more than the features' covariance allows (the
+  // alignment settled in another minimum), or a result the camera cannot have reached: the
+  // feature estimate stands alone, as it would without this step.
+  const Vector6d moved = logSE3(T_ref_curr_features.inverse() * dense.T_ref_curr);
+  const double mahalanobis_squared = moved.dot(prior.ldlt().solve(moved));
+  const double gate = config_.motion_prior_gate_sigma;
+  const SE3 T_world_dense = normalizedSE3(T_world_ref * dense.T_ref_curr);
+  const double dt_s = static_cast<double>(curr.utime - last_measured_utime_) * 1e-6;
+  if (!std::isfinite(mahalanobis_squared) || (gate > 0.0 && mahalanobis_squared > gate * gate) ||
+      !implausibility(T_world_dense, dense.covariance, dt_s).empty()) {
+    ++res.stats.dense_refinements_rejected;
+    return;
+  }
+  T_world_curr = T_world_dense;
+  res.T_ref_curr = normalizedSE3(T_world_measured_ref.inverse() * T_world_curr);
+  // The step from the previous frame is the alignment's posterior (features and pixels together).
+  res.covariance = dense.covariance;
+  if (!keyframe_is_reference) res.covariance_ref_curr = dense.covariance;
+  res.stats.refined_with_dense_alignment = true;
+}
+
 void VisualOdometry::associateWithKeyframe(const TrackAttempt& attempt, const Keyframe& kf,
                                            std::vector<std::int64_t>& curr_landmarks) const {
   if (!local_map_.hasKeyframe(kf.id)) return;
@@ -1482,6 +1528,9 @@ OdometryResult VisualOdometry::process(const RgbdFrame& frame, const RgbdFramePt
     refineInLocalWindow(curr, attempt, T_world_curr, res);
   }
   if (keyframe_is_reference) refineWithPreviousFrame(curr, attempt, T_world_curr, res);
+  refineWithDenseAlignment(curr, attempt,
+                           keyframe_is_reference ? keyframe_->T_world_camera : measured.T_world_ref,
+                           keyframe_is_reference, T_world_curr, res);
   // Re-using another keyframe or refining can move the estimate: the veto holds for the result.
   if (rejected(T_world_curr, attempt.covariance, T_world_pred, dt_s, res.stats)) {
     return fail(std::move(res), OdometryStatus::kImplausibleMotion, curr.features, t_start);
@@ -1578,6 +1627,17 @@ Matrix6d VisualOdometry::chainedCovariance(const SE3& T_prev_curr,
   return ad * covariance_keyframe_prev_ * ad.transpose() + step_covariance;
 }
 
+void VisualOdometry::buildDensePyramids(CurrentFrame& curr) {
+  if (!dense_reference_.pyramid) {
+    dense_reference_.pyramid = std::make_shared<const DenseFrame>(makeDenseFrame(
+        dense_reference_.gray, dense_reference_.depth_m, dense_reference_.K, dense_options_));
+  }
+  if (!curr.pyramid) {
+    curr.pyramid = std::make_shared<const DenseFrame>(
+        makeDenseFrame(curr.gray, curr.depth_m, curr.K, dense_options_));
+  }
+}
+
 bool VisualOdometry::measureDense(CurrentFrame& curr, const SE3& T_world_pred, OdometryResult& res,
                                   SE3& T_world_curr) {
   if (!config_.dense_fallback || dense_reference_.gray.empty() || curr.gray.empty() ||
@@ -1586,12 +1646,7 @@ bool VisualOdometry::measureDense(CurrentFrame& curr, const SE3& T_world_pred, O
     return false;
   }
   const std::int64_t t0 = steadyNowNs();
-  if (!dense_reference_.pyramid) {
-    dense_reference_.pyramid = std::make_shared<const DenseFrame>(makeDenseFrame(
-        dense_reference_.gray, dense_reference_.depth_m, dense_reference_.K, dense_options_));
-  }
-  curr.pyramid = std::make_shared<const DenseFrame>(
-      makeDenseFrame(curr.gray, curr.depth_m, curr.K, dense_options_));
+  buildDensePyramids(curr);
   // The prior: constant velocity from the last measured frame, as uncertain as a change of
   // speed and turn rate over the interval allows.
   const double interval_s =

@@ -242,19 +242,22 @@ TEST(VisualOdometry, AfterALossAFrameThatSeesARecentKeyframeAgainIsRelocalisedIn
   EXPECT_EQ(r.segment, 1);
 }
 
-// Few features (max_features 60), so every frame has fewer inliers against its keyframe than
-// keyframe_min_inliers, in a turn of 2 degrees a frame: each such frame is refined jointly with
-// its matches against the previous frame, and stays as accurate as without.
+// Few features (max_features 60 unless given), so every frame has fewer inliers against its
+// keyframe than keyframe_min_inliers, in a turn of 2 degrees a frame: each such frame is refined
+// jointly with its matches against the previous frame (and, with `dense`, aligned densely against
+// it from the feature estimate), and stays as accurate as without.
 struct FewInliersTurn {
   int refined_with_previous = 0;
+  int refined_with_dense = 0;
   double max_rotation_error_deg = 0.0;
   double max_translation_error_m = 0.0;
 };
 
-FewInliersTurn runFewInliersTurn(bool previous_frame) {
+FewInliersTurn runFewInliersTurn(bool previous_frame, bool dense = false, int max_features = 60) {
   TrackingConfig config;
-  config.max_features = 60;
+  config.max_features = max_features;
   config.few_inliers_previous_frame = previous_frame;
+  config.few_inliers_dense = dense;
   VisualOdometry vo(config);
   const test::TexturedBox box({-2, -1.5, -1}, {2, 1.5, 3}, 7);
   FewInliersTurn out;
@@ -266,6 +269,7 @@ FewInliersTurn runFewInliersTurn(bool previous_frame) {
     const OdometryResult r = vo.processFrame(frame);
     EXPECT_EQ(r.status, OdometryStatus::kOk) << i;
     if (r.stats.refined_with_previous_frame) ++out.refined_with_previous;
+    if (r.stats.refined_with_dense_alignment) ++out.refined_with_dense;
     out.max_rotation_error_deg =
         std::max(out.max_rotation_error_deg, rotationErrorDeg(r.T_world_camera, T_true));
     out.max_translation_error_m =
@@ -287,6 +291,22 @@ TEST(VisualOdometry, AFrameWithFewInliersIsRefinedWithThePreviousFrameToo) {
   EXPECT_EQ(without.refined_with_previous, 0);
   EXPECT_LT(with.max_rotation_error_deg, 0.3);
   EXPECT_LT(with.max_translation_error_m, 0.01);
+}
+
+TEST(VisualOdometry, AFrameWithFewInliersIsAlsoAlignedDenselyFromTheFeatureEstimate) {
+  // 25 features: about half the frames of the turn have fewer inliers than keyframe_min_inliers.
+  const FewInliersTurn with = runFewInliersTurn(true, true, 25);
+  const FewInliersTurn without = runFewInliersTurn(true, false, 25);
+  std::printf(
+      "25 features, 2 deg a frame: %d frames aligned densely from the feature estimate; worst "
+      "error %.3f deg %.4f m (features only: %.3f deg %.4f m)\n",
+      with.refined_with_dense, with.max_rotation_error_deg, with.max_translation_error_m,
+      without.max_rotation_error_deg, without.max_translation_error_m);
+  EXPECT_GE(with.refined_with_dense, 8);
+  EXPECT_EQ(without.refined_with_dense, 0);
+  EXPECT_LT(with.max_rotation_error_deg, 0.03);
+  EXPECT_LT(with.max_translation_error_m, 0.002);
+  EXPECT_LT(with.max_rotation_error_deg, 0.5 * without.max_rotation_error_deg);
 }
 
 // The back end has not placed the segment in its map (after a loss, or a loaded session not yet

@@ -89,6 +89,12 @@ struct TrackingConfig {
   /// sideways slide look alike on one plane); the previous frame, a frame's motion away, shares
   /// more of the view, and the frame would otherwise become a keyframe with that error.
   bool few_inliers_previous_frame = true;
+  /// Such a frame (fewer than keyframe_min_inliers inliers, against its keyframe or the previous
+  /// frame) is also aligned densely against the previous measured frame, with the feature estimate
+  /// and its covariance as the prior: the result is the two measurements combined, each by its
+  /// information. Few matches on one plain wall leave the yaw to a fraction of a degree; the
+  /// pixels with a gradient and the depth pin the step from the previous frame down.
+  bool few_inliers_dense = true;
 
   // --- FOVIS front end ------------------------------------------------------------------------
   int fovis_levels = 3;

@@ -74,6 +74,12 @@ struct OdometryStats {
   bool relocalization_keyframe = false;
   /// Few inliers against the keyframe: refined jointly with the previous frame's matches.
   bool refined_with_previous_frame = false;
+  /// Few inliers: aligned densely against the previous measured frame, the feature estimate as
+  /// the prior (tracking.few_inliers_dense).
+  bool refined_with_dense_alignment = false;
+  /// Such an alignment that disagreed with the feature estimate beyond the motion prior's gate
+  /// (tracking.motion_prior_gate_sigma) or implied impossible motion: not used.
+  int dense_refinements_rejected = 0;
   int implausible_estimates = 0;  ///< estimates vetoed by the motion limits (then retried)
   int prior_disagreements = 0;    ///< estimates rejected by the motion prior's gate (then retried)
   int local_map_landmarks = 0;    ///< landmarks of covisible keyframes searched (local_map)
@@ -182,6 +188,7 @@ class VisualOdometry {
                              double dt_s) const;
   /// The constant-velocity prior's covariance over interval_s (motion_prior_sigma_*).
   Matrix6d motionPriorCovariance(double interval_s) const;
+
   /// Whether a feature estimate lies further than tracking.motion_prior_gate_sigma from the
   /// prediction T_world_pred made dt_s after the last measured frame (prior and estimate
   /// covariance combined). False while no velocity is known.
@@ -212,6 +219,16 @@ class VisualOdometry {
   /// refined jointly with the matches against the previous measured frame, held at its pose.
   void refineWithPreviousFrame(const CurrentFrame& curr, TrackAttempt& attempt, SE3& T_world_curr,
                                OdometryResult& res);
+  /// A feature estimate with few inliers (tracking.few_inliers_dense), measured against the frame
+  /// at T_world_measured_ref (keyframe_ when keyframe_is_reference, else the previous frame):
+  /// aligned densely against the previous measured frame from it, with its covariance (carried
+  /// from the keyframe through the chain since it) as the prior. On success T_world_curr, the
+  /// step's covariance and res.T_ref_curr hold the combined estimate.
+  /// Dense alignment's pyramids of the reference and the current frame, each built once.
+  void buildDensePyramids(CurrentFrame& curr);
+  void refineWithDenseAlignment(CurrentFrame& curr, const TrackAttempt& attempt,
+                                const SE3& T_world_measured_ref, bool keyframe_is_reference,
+                                SE3& T_world_curr, OdometryResult& res);
   /// After LOST: measures the frame against the most recent keyframes (relocalization_*); true
   /// (keyframe_, T_world_curr and res's reference fields set) when one matched well enough at a
   /// pose the camera can have reached since the last measured frame.
