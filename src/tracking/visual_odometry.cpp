@@ -1173,7 +1173,6 @@ void VisualOdometry::refineWithPreviousFrame(const CurrentFrame& curr, TrackAtte
 }
 
 void VisualOdometry::refineWithDenseAlignment(CurrentFrame& curr, const TrackAttempt& attempt,
-                                              const SE3& T_world_measured_ref,
                                               bool keyframe_is_reference, SE3& T_world_curr,
                                               OdometryResult& res) {
   if (!config_.few_inliers_dense || attempt.num_inliers >= config_.keyframe_min_inliers ||
@@ -1207,10 +1206,11 @@ void VisualOdometry::refineWithDenseAlignment(CurrentFrame& curr, const TrackAtt
   const double dt_s = static_cast<double>(curr.utime - last_measured_utime_) * 1e-6;
   if (!std::isfinite(mahalanobis_squared) || (gate > 0.0 && mahalanobis_squared > gate * gate) ||
       !implausibility(T_world_dense, dense.covariance, dt_s).empty()) {
-    ++res.stats.dense_refinements_rejected;
     return;
   }
   T_world_curr = T_world_dense;
+  const SE3& T_world_measured_ref =
+      keyframe_is_reference ? keyframe_->T_world_camera : dense_reference_.T_world_camera;
   res.T_ref_curr = normalizedSE3(T_world_measured_ref.inverse() * T_world_curr);
   // The step from the previous frame is the alignment's posterior (features and pixels together).
   res.covariance = dense.covariance;
@@ -1528,9 +1528,7 @@ OdometryResult VisualOdometry::process(const RgbdFrame& frame, const RgbdFramePt
     refineInLocalWindow(curr, attempt, T_world_curr, res);
   }
   if (keyframe_is_reference) refineWithPreviousFrame(curr, attempt, T_world_curr, res);
-  refineWithDenseAlignment(curr, attempt,
-                           keyframe_is_reference ? keyframe_->T_world_camera : measured.T_world_ref,
-                           keyframe_is_reference, T_world_curr, res);
+  refineWithDenseAlignment(curr, attempt, keyframe_is_reference, T_world_curr, res);
   // Re-using another keyframe or refining can move the estimate: the veto holds for the result.
   if (rejected(T_world_curr, attempt.covariance, T_world_pred, dt_s, res.stats)) {
     return fail(std::move(res), OdometryStatus::kImplausibleMotion, curr.features, t_start);

@@ -16,10 +16,10 @@
 // current keyframe (guided by the constant-velocity prediction, or by descriptor over the whole
 // image when guidance fails), the motion is estimated by RANSAC + closed-form rigid fit (or a
 // maximum consistent clique for FOVIS) and refined robustly on SE(3); with few inliers, jointly
-// with the matches against the previous frame. When the keyframe cannot be tracked the previous
-// frame is tried. A frame becomes a keyframe when inliers, overlap or motion
-// since the keyframe cross thresholds. When features cannot measure a frame (a plain wall, a fast
-// turn in front of it), dense alignment against the last measured frame does
+// with the matches against the previous frame, then aligned densely from that estimate. When the
+// keyframe cannot be tracked the previous frame is tried. A frame becomes a keyframe when inliers,
+// overlap or motion since the keyframe cross thresholds. When features cannot measure a frame (a
+// plain wall, a fast turn in front of it), dense alignment against the last measured frame does
 // (tracking.dense_fallback); such a frame with enough features becomes a keyframe. Frames nothing
 // measures are bridged by constant-velocity prediction for tracking.max_predicted_frames frames;
 // then tracking is LOST and the next trackable frame starts a new segment (a new keyframe at the
@@ -77,9 +77,6 @@ struct OdometryStats {
   /// Few inliers: aligned densely against the previous measured frame, the feature estimate as
   /// the prior (tracking.few_inliers_dense).
   bool refined_with_dense_alignment = false;
-  /// Such an alignment that disagreed with the feature estimate beyond the motion prior's gate
-  /// (tracking.motion_prior_gate_sigma) or implied impossible motion: not used.
-  int dense_refinements_rejected = 0;
   int implausible_estimates = 0;  ///< estimates vetoed by the motion limits (then retried)
   int prior_disagreements = 0;    ///< estimates rejected by the motion prior's gate (then retried)
   int local_map_landmarks = 0;    ///< landmarks of covisible keyframes searched (local_map)
@@ -188,7 +185,6 @@ class VisualOdometry {
                              double dt_s) const;
   /// The constant-velocity prior's covariance over interval_s (motion_prior_sigma_*).
   Matrix6d motionPriorCovariance(double interval_s) const;
-
   /// Whether a feature estimate lies further than tracking.motion_prior_gate_sigma from the
   /// prediction T_world_pred made dt_s after the last measured frame (prior and estimate
   /// covariance combined). False while no velocity is known.
@@ -219,16 +215,15 @@ class VisualOdometry {
   /// refined jointly with the matches against the previous measured frame, held at its pose.
   void refineWithPreviousFrame(const CurrentFrame& curr, TrackAttempt& attempt, SE3& T_world_curr,
                                OdometryResult& res);
-  /// A feature estimate with few inliers (tracking.few_inliers_dense), measured against the frame
-  /// at T_world_measured_ref (keyframe_ when keyframe_is_reference, else the previous frame):
-  /// aligned densely against the previous measured frame from it, with its covariance (carried
-  /// from the keyframe through the chain since it) as the prior. On success T_world_curr, the
-  /// step's covariance and res.T_ref_curr hold the combined estimate.
+  /// A feature estimate with few inliers (tracking.few_inliers_dense), measured against keyframe_
+  /// when keyframe_is_reference, else against the previous frame: aligned densely against the
+  /// previous measured frame from it, with its covariance (carried from the keyframe through the
+  /// chain since it) as the prior. On success T_world_curr, the step's covariance and
+  /// res.T_ref_curr hold the combined estimate.
+  void refineWithDenseAlignment(CurrentFrame& curr, const TrackAttempt& attempt,
+                                bool keyframe_is_reference, SE3& T_world_curr, OdometryResult& res);
   /// Dense alignment's pyramids of the reference and the current frame, each built once.
   void buildDensePyramids(CurrentFrame& curr);
-  void refineWithDenseAlignment(CurrentFrame& curr, const TrackAttempt& attempt,
-                                const SE3& T_world_measured_ref, bool keyframe_is_reference,
-                                SE3& T_world_curr, OdometryResult& res);
   /// After LOST: measures the frame against the most recent keyframes (relocalization_*); true
   /// (keyframe_, T_world_curr and res's reference fields set) when one matched well enough at a
   /// pose the camera can have reached since the last measured frame.
