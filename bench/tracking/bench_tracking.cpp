@@ -2,6 +2,7 @@
 //   build/bin/bench_tracking [--benchmark_filter=Orb]
 // Whole-sequence timing and accuracy (fr1/xyz, synthetic worlds) come from slamd-odometry-run.
 
+#include <cmath>
 #include <random>
 #include <vector>
 
@@ -147,12 +148,11 @@ void BM_DenseFrame(benchmark::State& state) {
 }
 BENCHMARK(BM_DenseFrame)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
 
-/// Dense alignment of frame 3 to frame 0 from a constant-velocity-like prior (one frame's motion
-/// off), finest level as the argument (1 = half resolution, the default).
-void BM_DenseAlign(benchmark::State& state) {
+/// Times dense alignment of frame 3 to frame 0 from the prior given as its motion from frame 3's
+/// true pose (T_true_prior) and covariance; reports the result's error, iterations and failure.
+void timeDenseAlignment(benchmark::State& state, const DenseAlignmentOptions& options,
+                        const SE3& T_true_prior, const Matrix6d& prior_covariance) {
   cv::setNumThreads(1);
-  DenseAlignmentOptions options;
-  options.finest_level = static_cast<int>(state.range(0));
   const RgbdFrame& ref_frame = sequence()[0];
   const RgbdFrame& curr_frame = sequence()[3];
   const DenseFrame ref =
@@ -160,10 +160,7 @@ void BM_DenseAlign(benchmark::State& state) {
   const DenseFrame curr =
       makeDenseFrame(curr_frame.gray, curr_frame.depth_m, curr_frame.intrinsics, options);
   const SE3 truth = pose(0).inverse() * pose(3);
-  const SE3 prior = pose(0).inverse() * pose(2);
-  Vector6d variance;
-  variance << Eigen::Vector3d::Constant(0.02 * 0.02), Eigen::Vector3d::Constant(0.035 * 0.035);
-  const Matrix6d prior_covariance = variance.asDiagonal();
+  const SE3 prior = truth * T_true_prior;
   DenseAlignmentResult result;
   for (auto _ : state) {
     result = alignDense(ref, curr, prior, prior_covariance, options);
@@ -173,8 +170,34 @@ void BM_DenseAlign(benchmark::State& state) {
   state.counters["error_mm"] = error.translation().norm() * 1e3;
   state.counters["error_deg"] = rotationAngleRad(error.linear()) * 180.0 / M_PI;
   state.counters["iterations"] = result.iterations;
+  state.SetLabel(result.failure);
+}
+
+/// From a constant-velocity-like prior (one frame's motion off), finest level as the argument
+/// (1 = half resolution, the default).
+void BM_DenseAlign(benchmark::State& state) {
+  DenseAlignmentOptions options;
+  options.finest_level = static_cast<int>(state.range(0));
+  Vector6d variance;
+  variance << Eigen::Vector3d::Constant(0.02 * 0.02), Eigen::Vector3d::Constant(0.035 * 0.035);
+  timeDenseAlignment(state, options, pose(3).inverse() * pose(2), variance.asDiagonal());
 }
 BENCHMARK(BM_DenseAlign)->Arg(0)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond);
+
+/// From a close prior, as a feature estimate with few inliers gives (0.5 deg and 1 cm off, sigmas
+/// 0.3 deg and 1 cm), sampling the argument's number of pixels per level
+/// (tracking.few_inliers_dense_max_pixels).
+void BM_DenseRefine(benchmark::State& state) {
+  DenseAlignmentOptions options;
+  options.max_pixels_per_level = static_cast<int>(state.range(0));
+  Vector6d offset;
+  offset << 0.006, -0.004, 0.006, 0.005, 0.006, -0.003;  // 1 cm, 0.5 deg
+  Vector6d variance;
+  variance << Eigen::Vector3d::Constant(0.01 * 0.01),
+      Eigen::Vector3d::Constant(std::pow(0.3 * M_PI / 180.0, 2));
+  timeDenseAlignment(state, options, expSE3(offset), variance.asDiagonal());
+}
+BENCHMARK(BM_DenseRefine)->Arg(10000)->Arg(20000)->Unit(benchmark::kMillisecond);
 
 }  // namespace
 }  // namespace slamd

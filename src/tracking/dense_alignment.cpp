@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <limits>
 #include <optional>
 
@@ -19,9 +20,21 @@ constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
 /// no normal there, and no averaging across it when the pyramid is built.
 constexpr double kDiscontinuityRatio = 0.05;
 
-/// 2x2 block average of the valid depths when they agree; NaN across a discontinuity.
-cv::Mat downsampleDepth(const cv::Mat& depth_m) {
-  cv::Mat out(depth_m.rows / 2, depth_m.cols / 2, CV_32F, cv::Scalar(kNaN));
+/// A float image (CV_32F or CV_32FC3) filled with NaN (std::fill: OpenCV's generic fill with a
+/// scalar is several times slower).
+cv::Mat nanImage(int rows, int cols, int type) {
+  cv::Mat image(rows, cols, type);
+  float* data = image.ptr<float>(0);
+  std::fill(data, data + image.total() * static_cast<std::size_t>(image.channels()), kNaN);
+  return image;
+}
+
+/// 2x2 block average of the valid depths (not NaN, and within [min_m, max_m]) when they agree;
+/// NaN across a discontinuity.
+cv::Mat downsampleDepth(const cv::Mat& depth_m,
+                        double min_m = -std::numeric_limits<double>::infinity(),
+                        double max_m = std::numeric_limits<double>::infinity()) {
+  cv::Mat out = nanImage(depth_m.rows / 2, depth_m.cols / 2, CV_32F);
   for (int v = 0; v < out.rows; ++v) {
     const float* r0 = depth_m.ptr<float>(2 * v);
     const float* r1 = depth_m.ptr<float>(2 * v + 1);
@@ -33,7 +46,8 @@ cv::Mat downsampleDepth(const cv::Mat& depth_m) {
       float sum = 0.0F;
       int n = 0;
       for (float z : values) {
-        if (std::isnan(z)) continue;
+        const double z_m = z;  // NaN fails both comparisons
+        if (!(z_m >= min_m && z_m <= max_m)) continue;
         lo = std::min(lo, z);
         hi = std::max(hi, z);
         sum += z;
@@ -47,38 +61,74 @@ cv::Mat downsampleDepth(const cv::Mat& depth_m) {
   return out;
 }
 
+/// Half-size CV_32F grey image of a CV_8UC1 one of even size: the mean of each 2x2 block.
+cv::Mat halveGray(const cv::Mat& gray) {
+  cv::Mat out(gray.rows / 2, gray.cols / 2, CV_32F);
+  for (int v = 0; v < out.rows; ++v) {
+    const std::uint8_t* r0 = gray.ptr<std::uint8_t>(2 * v);
+    const std::uint8_t* r1 = gray.ptr<std::uint8_t>(2 * v + 1);
+    float* o = out.ptr<float>(v);
+    for (int u = 0; u < out.cols; ++u) {
+      const int sum = r0[2 * u] + r0[2 * u + 1] + r1[2 * u] + r1[2 * u + 1];
+      o[u] = 0.25F * static_cast<float>(sum);
+    }
+  }
+  return out;
+}
+
 /// Unit normals facing the camera. Depth noise makes per-pixel normals tilt at random, and a
 /// tilted normal of a wall along a corridor claims information along the corridor that the wall
 /// does not give: so the normals come from the depth averaged over a window (valid pixels only)
 /// and differences across a wider stencil.
 cv::Mat computeNormals(const cv::Mat& depth_m, const CameraIntrinsics& K) {
-  constexpr int kWindow = 5;           // averaging window, pixels
-  constexpr int kStencil = 2;          // half-width of the differences, pixels
-  cv::Mat valid = depth_m == depth_m;  // false for NaN
-  cv::Mat filled = depth_m.clone();
-  filled.setTo(0.0F, ~valid);
-  cv::Mat valid_f;
-  valid.convertTo(valid_f, CV_32F, 1.0 / 255.0);
+  constexpr int kWindow = 5;   // averaging window, pixels
+  constexpr int kStencil = 2;  // half-width of the differences, pixels
+  const int rows = depth_m.rows, cols = depth_m.cols;
+  cv::Mat filled(depth_m.size(), CV_32F);  // 0 where unknown
+  cv::Mat valid(depth_m.size(), CV_32F);   // 1 where known, else 0
+  for (int v = 0; v < rows; ++v) {
+    const float* raw = depth_m.ptr<float>(v);
+    float* f = filled.ptr<float>(v);
+    float* m = valid.ptr<float>(v);
+    for (int u = 0; u < cols; ++u) {
+      const bool known = !std::isnan(raw[u]);
+      f[u] = known ? raw[u] : 0.0F;
+      m[u] = known ? 1.0F : 0.0F;
+    }
+  }
   cv::Mat sum, count;
   cv::boxFilter(filled, sum, CV_32F, cv::Size(kWindow, kWindow), cv::Point(-1, -1), false);
-  cv::boxFilter(valid_f, count, CV_32F, cv::Size(kWindow, kWindow), cv::Point(-1, -1), false);
-  cv::Mat smooth(depth_m.size(), CV_32F, cv::Scalar(kNaN));
-  for (int v = 0; v < depth_m.rows; ++v) {
+  cv::boxFilter(valid, count, CV_32F, cv::Size(kWindow, kWindow), cv::Point(-1, -1), false);
+  // The averaged depth and its back-projection (x, y in metres), each pixel's computed once: the
+  // differences below take every point four times.
+  cv::Mat smooth(depth_m.size(), CV_32F);
+  std::vector<double> x_m(static_cast<std::size_t>(rows) * static_cast<std::size_t>(cols));
+  std::vector<double> y_m(x_m.size());
+  for (int v = 0; v < rows; ++v) {
     const float* raw = depth_m.ptr<float>(v);
     const float* s = sum.ptr<float>(v);
     const float* c = count.ptr<float>(v);
     float* out = smooth.ptr<float>(v);
-    for (int u = 0; u < depth_m.cols; ++u) {
-      if (!std::isnan(raw[u]) && c[u] >= 0.5F * kWindow * kWindow) out[u] = s[u] / c[u];
+    const std::size_t row_start = static_cast<std::size_t>(v) * static_cast<std::size_t>(cols);
+    for (int u = 0; u < cols; ++u) {
+      out[u] = (!std::isnan(raw[u]) && c[u] >= 0.5F * kWindow * kWindow) ? s[u] / c[u] : kNaN;
+      const Eigen::Vector3d point = K.backProject(u, v, out[u]);
+      x_m[row_start + static_cast<std::size_t>(u)] = point.x();
+      y_m[row_start + static_cast<std::size_t>(u)] = point.y();
     }
   }
-  cv::Mat normals(depth_m.size(), CV_32FC3, cv::Scalar(kNaN, kNaN, kNaN));
-  for (int v = kStencil; v < depth_m.rows - kStencil; ++v) {
+  const auto at = [&](int u, int v, float z) {
+    const std::size_t i =
+        static_cast<std::size_t>(v) * static_cast<std::size_t>(cols) + static_cast<std::size_t>(u);
+    return Eigen::Vector3d(x_m[i], y_m[i], static_cast<double>(z));
+  };
+  cv::Mat normals = nanImage(rows, cols, CV_32FC3);
+  for (int v = kStencil; v < rows - kStencil; ++v) {
     const float* up = smooth.ptr<float>(v - kStencil);
     const float* row = smooth.ptr<float>(v);
     const float* down = smooth.ptr<float>(v + kStencil);
     cv::Vec3f* out = normals.ptr<cv::Vec3f>(v);
-    for (int u = kStencil; u < depth_m.cols - kStencil; ++u) {
+    for (int u = kStencil; u < cols - kStencil; ++u) {
       const float z = row[u];
       const float zl = row[u - kStencil], zr = row[u + kStencil], zu = up[u], zd = down[u];
       if (std::isnan(z) || std::isnan(zl) || std::isnan(zr) || std::isnan(zu) || std::isnan(zd)) {
@@ -90,15 +140,13 @@ cv::Mat computeNormals(const cv::Mat& depth_m, const CameraIntrinsics& K) {
           static_cast<double>(std::abs(zd - zu)) > limit) {
         continue;
       }
-      const Eigen::Vector3d du =
-          K.backProject(u + kStencil, v, zr) - K.backProject(u - kStencil, v, zl);
-      const Eigen::Vector3d dv =
-          K.backProject(u, v + kStencil, zd) - K.backProject(u, v - kStencil, zu);
+      const Eigen::Vector3d du = at(u + kStencil, v, zr) - at(u - kStencil, v, zl);
+      const Eigen::Vector3d dv = at(u, v + kStencil, zd) - at(u, v - kStencil, zu);
       Eigen::Vector3d n = du.cross(dv);
       const double norm = n.norm();
       if (!(norm > 0.0)) continue;
       n /= norm;
-      if (n.dot(K.backProject(u, v, z)) > 0.0) n = -n;
+      if (n.dot(at(u, v, z)) > 0.0) n = -n;
       out[u] = cv::Vec3f(static_cast<float>(n.x()), static_cast<float>(n.y()),
                          static_cast<float>(n.z()));
     }
@@ -333,21 +381,33 @@ DenseFrame makeDenseFrame(const cv::Mat& gray, const cv::Mat& depth_m, const Cam
       (K.width >> (options.levels - 1)) < 8 || (K.height >> (options.levels - 1)) < 8) {
     return frame;
   }
+  frame.levels.resize(static_cast<std::size_t>(options.levels));
+  frame.levels[0].K = K;
   cv::Mat level_gray;
-  gray.convertTo(level_gray, CV_32F);
-  cv::Mat level_depth(depth_m.size(), CV_32F);
-  for (int v = 0; v < depth_m.rows; ++v) {
-    const float* in = depth_m.ptr<float>(v);
-    float* out = level_depth.ptr<float>(v);
-    for (int u = 0; u < depth_m.cols; ++u) {
-      const float z = in[u];
-      const double z_m = z;
-      out[u] = (z_m >= options.min_depth_m && z_m <= options.max_depth_m) ? z : kNaN;
+  cv::Mat level_depth;
+  int first_level = 0;
+  if (options.finest_level > 0 && gray.cols % 2 == 0 && gray.rows % 2 == 0) {
+    // Full resolution is never aligned: half resolution comes straight from the inputs, without
+    // full-size float copies (a third of the pyramid's time). The same values as resizing the
+    // float image: the 2x2 mean of whole grey levels is exact either way.
+    level_gray = halveGray(gray);
+    level_depth = downsampleDepth(depth_m, options.min_depth_m, options.max_depth_m);
+    first_level = 1;
+  } else {
+    gray.convertTo(level_gray, CV_32F);
+    level_depth = cv::Mat(depth_m.size(), CV_32F);
+    for (int v = 0; v < depth_m.rows; ++v) {
+      const float* in = depth_m.ptr<float>(v);
+      float* out = level_depth.ptr<float>(v);
+      for (int u = 0; u < depth_m.cols; ++u) {
+        const float z = in[u];
+        const double z_m = z;
+        out[u] = (z_m >= options.min_depth_m && z_m <= options.max_depth_m) ? z : kNaN;
+      }
     }
   }
-  frame.levels.resize(static_cast<std::size_t>(options.levels));
-  for (int k = 0; k < options.levels; ++k) {
-    if (k > 0) {
+  for (int k = first_level; k < options.levels; ++k) {
+    if (k > first_level) {
       cv::Mat smaller;
       cv::resize(level_gray, smaller, cv::Size(level_gray.cols / 2, level_gray.rows / 2), 0, 0,
                  cv::INTER_AREA);

@@ -202,7 +202,10 @@ VisualOdometry::VisualOdometry(const TrackingConfig& config)
     : config_(config),
       extractor_(makeFeatureExtractor(config)),
       local_map_(config.depth_sigma_coeff),
-      dense_options_(denseOptions(config)) {}
+      dense_options_(denseOptions(config)),
+      refine_dense_options_(dense_options_) {
+  refine_dense_options_.max_pixels_per_level = config.few_inliers_dense_max_pixels;
+}
 
 VisualOdometry::~VisualOdometry() = default;
 
@@ -1193,7 +1196,7 @@ void VisualOdometry::refineWithDenseAlignment(CurrentFrame& curr, const TrackAtt
                              ? chainedCovariance(T_ref_curr_features, attempt.covariance)
                              : attempt.covariance;
   const DenseAlignmentResult dense = alignDense(*dense_reference_.pyramid, *curr.pyramid,
-                                                T_ref_curr_features, prior, dense_options_);
+                                                T_ref_curr_features, prior, refine_dense_options_);
   res.stats.time_dense_ms += msSince(t0);
   if (!dense.success) return;
   // Two measurements that disagree by far more than the features' covariance allows (the

@@ -82,6 +82,8 @@ struct DenseAlignmentOptions {
 };
 
 /// One frame's pyramid: grey (float), its gradients, depth (NaN = none) and normals per level.
+/// Levels finer than DenseAlignmentOptions::finest_level are never aligned: they hold no gradients
+/// or normals, and full resolution (level 0) may hold only its K.
 struct DenseFrame {
   struct Level {
     CameraIntrinsics K;

@@ -360,6 +360,8 @@ class VisualOdometry {
   };
   DenseReference dense_reference_;
   DenseAlignmentOptions dense_options_;
+  /// The same, with refineWithDenseAlignment's pixel budget.
+  DenseAlignmentOptions refine_dense_options_;
 };
 
 }  // namespace slamd
