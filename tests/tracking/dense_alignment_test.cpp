@@ -213,6 +213,53 @@ TEST(DenseAlignment, APlainCorridorsFarEndIsNotPulledOffAlongItsOneEdge) {
   }
 }
 
+/// Equal element for element, NaN matching NaN.
+bool sameFloats(const cv::Mat& a, const cv::Mat& b) {
+  if (a.size() != b.size() || a.type() != b.type()) return false;
+  const cv::Mat a1 = a.reshape(1), b1 = b.reshape(1);
+  for (int v = 0; v < a1.rows; ++v) {
+    for (int u = 0; u < a1.cols; ++u) {
+      const float x = a1.at<float>(v, u), y = b1.at<float>(v, u);
+      if (!(x == y || (std::isnan(x) && std::isnan(y)))) return false;
+    }
+  }
+  return true;
+}
+
+TEST(DenseAlignment, HalfResolutionBuiltStraightFromTheInputsIsTheSameAsFromFullResolution) {
+  // finest_level 1 builds level 1 from the 8-bit grey and raw depth directly; finest_level 0 goes
+  // through full-resolution float images. Every level both build must hold the same values.
+  const auto source = makeSource("room", {});
+  const RgbdFramePtr frame = source->renderFrame(30);
+  cv::Mat gray = frame->gray;
+  if (gray.empty()) cv::cvtColor(frame->color_bgr, gray, cv::COLOR_BGR2GRAY);
+  cv::Mat depth_m = frame->depth_m.clone();
+  // Depths outside [min_depth_m, max_depth_m], zero and unknown, in blocks and single pixels.
+  depth_m(cv::Rect(100, 100, 40, 30)).setTo(0.0F);
+  depth_m(cv::Rect(300, 200, 33, 21)).setTo(9.0F);
+  depth_m(cv::Rect(401, 51, 17, 9)).setTo(std::numeric_limits<float>::quiet_NaN());
+  for (int k = 0; k < 500; ++k) depth_m.at<float>((k * 37) % 480, (k * 101) % 640) = 0.1F;
+  DenseAlignmentOptions from_full;
+  from_full.finest_level = 0;
+  DenseAlignmentOptions from_half;
+  ASSERT_EQ(from_half.finest_level, 1);
+  const DenseFrame full = makeDenseFrame(gray, depth_m, frame->intrinsics, from_full);
+  const DenseFrame half = makeDenseFrame(gray, depth_m, frame->intrinsics, from_half);
+  ASSERT_EQ(full.levels.size(), half.levels.size());
+  for (std::size_t k = 1; k < half.levels.size(); ++k) {
+    const DenseFrame::Level& a = full.levels[k];
+    const DenseFrame::Level& b = half.levels[k];
+    EXPECT_TRUE(sameFloats(a.gray, b.gray)) << "level " << k;
+    EXPECT_TRUE(sameFloats(a.depth_m, b.depth_m)) << "level " << k;
+    EXPECT_TRUE(sameFloats(a.grad_x, b.grad_x)) << "level " << k;
+    EXPECT_TRUE(sameFloats(a.grad_y, b.grad_y)) << "level " << k;
+    EXPECT_TRUE(sameFloats(a.normals, b.normals)) << "level " << k;
+  }
+  // And the blocks are gone at half resolution, not averaged in.
+  EXPECT_TRUE(std::isnan(half.levels[1].depth_m.at<float>(60, 60)));
+  EXPECT_TRUE(std::isnan(half.levels[1].depth_m.at<float>(105, 155)));
+}
+
 TEST(DenseAlignment, InputsThatDoNotFitAreReportedNotThrown) {
   const DenseAlignmentOptions options;
   CameraIntrinsics K;
