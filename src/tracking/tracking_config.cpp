@@ -114,9 +114,11 @@ const ConfigSchema<TrackingConfig>& TrackingConfig::schema() {
                 "a frame with fewer than keyframe_min_inliers inliers is also aligned densely "
                 "against the previous measured frame, the feature estimate as the prior "
                 "(needs dense_fallback)")
-          .number("few_inliers_dense_max_pixels", &C::few_inliers_dense_max_pixels, 500, 100000,
-                  "pixels",
-                  "pixels per pyramid level that alignment samples (evenly; the fallback: 20000)")
+          .number(
+              "few_inliers_dense_max_pixels", &C::few_inliers_dense_max_pixels, 500, 100000,
+              "pixels",
+              "pixels per pyramid level that alignment samples (evenly); fewer cost less time but "
+              "refine fewer frames")
           .number("fovis_levels", &C::fovis_levels, 1, 5, "", "FOVIS pyramid levels")
           .number("fovis_fast_threshold", &C::fovis_fast_threshold, 5, 100, "grey levels",
                   "initial FAST threshold, adapted each frame towards max_features")

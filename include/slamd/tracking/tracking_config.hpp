@@ -95,11 +95,11 @@ struct TrackingConfig {
   /// information. Few matches on one plain wall leave the yaw to a fraction of a degree; the
   /// pixels with a gradient and the depth pin the step from the previous frame down.
   bool few_inliers_dense = true;
-  /// Pixels sampled per pyramid level (evenly) by that alignment. It starts from the feature
-  /// estimate and corrects it by tenths of a degree; the fallback's 20000 pixels are for measuring
-  /// a whole step from a rough prediction and cost twice the time. Fewer than this, and the pixels
-  /// outweigh the features' prior in too few directions for the result to count on more frames.
-  int few_inliers_dense_max_pixels = 10000;
+  /// Pixels sampled per pyramid level (evenly) by that alignment; by default as many as the
+  /// fallback samples. Fewer cost less time, but the result counts only where the pixels outweigh
+  /// the features' prior in at least three directions (DenseAlignmentOptions::
+  /// min_constrained_directions), and with fewer pixels that holds on fewer frames.
+  int few_inliers_dense_max_pixels = 20000;
 
   // --- FOVIS front end ------------------------------------------------------------------------
   int fovis_levels = 3;
