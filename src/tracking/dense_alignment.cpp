@@ -5,6 +5,7 @@
 #include <cstdint>
 #include <limits>
 #include <optional>
+#include <vector>
 
 #include <Eigen/Eigenvalues>
 #include <opencv2/imgproc.hpp>
@@ -21,12 +22,18 @@ constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
 constexpr double kDiscontinuityRatio = 0.05;
 
 /// A float image (CV_32F or CV_32FC3) filled with NaN (std::fill: OpenCV's generic fill with a
-/// scalar is several times slower).
+/// scalar is slower).
 cv::Mat nanImage(int rows, int cols, int type) {
   cv::Mat image(rows, cols, type);
   float* data = image.ptr<float>(0);
   std::fill(data, data + image.total() * static_cast<std::size_t>(image.channels()), kNaN);
   return image;
+}
+
+/// A depth is usable: known (NaN fails both comparisons) and within [min_m, max_m].
+bool inDepthRange(float z, double min_m, double max_m) {
+  const double z_m = z;
+  return z_m >= min_m && z_m <= max_m;
 }
 
 /// 2x2 block average of the valid depths (not NaN, and within [min_m, max_m]) when they agree;
@@ -46,8 +53,7 @@ cv::Mat downsampleDepth(const cv::Mat& depth_m,
       float sum = 0.0F;
       int n = 0;
       for (float z : values) {
-        const double z_m = z;  // NaN fails both comparisons
-        if (!(z_m >= min_m && z_m <= max_m)) continue;
+        if (!inDepthRange(z, min_m, max_m)) continue;
         lo = std::min(lo, z);
         hi = std::max(hi, z);
         sum += z;
@@ -388,8 +394,8 @@ DenseFrame makeDenseFrame(const cv::Mat& gray, const cv::Mat& depth_m, const Cam
   int first_level = 0;
   if (options.finest_level > 0 && gray.cols % 2 == 0 && gray.rows % 2 == 0) {
     // Full resolution is never aligned: half resolution comes straight from the inputs, without
-    // full-size float copies (a third of the pyramid's time). The same values as resizing the
-    // float image: the 2x2 mean of whole grey levels is exact either way.
+    // full-size float copies. The same values as resizing the float image: the 2x2 mean of whole
+    // grey levels is exact either way.
     level_gray = halveGray(gray);
     level_depth = downsampleDepth(depth_m, options.min_depth_m, options.max_depth_m);
     first_level = 1;
@@ -400,9 +406,7 @@ DenseFrame makeDenseFrame(const cv::Mat& gray, const cv::Mat& depth_m, const Cam
       const float* in = depth_m.ptr<float>(v);
       float* out = level_depth.ptr<float>(v);
       for (int u = 0; u < depth_m.cols; ++u) {
-        const float z = in[u];
-        const double z_m = z;
-        out[u] = (z_m >= options.min_depth_m && z_m <= options.max_depth_m) ? z : kNaN;
+        out[u] = inDepthRange(in[u], options.min_depth_m, options.max_depth_m) ? in[u] : kNaN;
       }
     }
   }
