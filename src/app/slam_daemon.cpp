@@ -11,6 +11,8 @@
 #include <future>
 #include <limits>
 #include <sstream>
+#include <string>
+#include <vector>
 
 #include <opencv2/core.hpp>
 
@@ -29,6 +31,7 @@
 #include "slamd/comms/frame_codec.hpp"
 #include "slamd/comms/lcm_bus.hpp"
 #include "slamd/comms/lcm_frame_publisher.hpp"
+#include "slamd/comms/lcm_relay.hpp"
 #include "slamd/comms/map_codec.hpp"
 #include "slamd/comms/odometry_codec.hpp"
 #include "slamd/comms/plane_map_codec.hpp"
@@ -53,37 +56,78 @@ const char* dropReason(const std::string& stage) {
   return "its queue was full";
 }
 
-/// What the steps publish, on the daemon's LCM channels.
+/// What the steps publish, on the daemon's LCM channels. Each message is encoded on the calling
+/// thread and handed to `send`: the bus itself, or an LcmRelay lane for a niced thread.
 class LcmDaemonPublisher final : public DaemonPublisher {
  public:
-  LcmDaemonPublisher(LcmBus& bus, const ChannelConfig& channels) : bus_(bus), channels_(channels) {}
+  using Send = std::function<void(std::string channel, std::vector<std::uint8_t> bytes)>;
+  LcmDaemonPublisher(Send send, const ChannelConfig& channels)
+      : send_(std::move(send)), channels_(channels) {}
 
   void publishPose(const PoseEstimate& pose) override {
-    bus_.publishMessage(channels_.pose, toPoseMessage(pose));
-    bus_.publishMessage(channels_.bot_pose, toBotCorePose(pose));
+    send(channels_.pose, toPoseMessage(pose));
+    send(channels_.bot_pose, toBotCorePose(pose));
   }
   void publishOdometry(const OdometryResult& odometry) override {
-    bus_.publishMessage(channels_.odometry, toOdometryMessage(odometry));
+    send(channels_.odometry, toOdometryMessage(odometry));
   }
   void publishVanishingPoint(Utime utime, const VanishingPointReport& report) override {
-    bus_.publishMessage(channels_.vanishing_point, toVanishingPointMessage(utime, report));
+    send(channels_.vanishing_point, toVanishingPointMessage(utime, report));
   }
   void publishKeyframes(const KeyframeTrajectory& trajectory) override {
-    bus_.publishMessage(channels_.keyframes, toKeyframeTrajectoryMessage(trajectory));
+    send(channels_.keyframes, toKeyframeTrajectoryMessage(trajectory));
   }
   void publishMapUpdate(const MapUpdate& update) override {
-    bus_.publishMessage(channels_.map_update, toMapUpdateMessage(update));
+    send(channels_.map_update, toMapUpdateMessage(update));
   }
-  void publishFullMap(const FullMap& map) override {
-    bus_.publishMessage(channels_.map, toFullMapMessage(map));
-  }
+  void publishFullMap(const FullMap& map) override { send(channels_.map, toFullMapMessage(map)); }
   void publishPlaneMap(const planes::PlaneMapSnapshot& plane_map) override {
-    bus_.publishMessage(channels_.plane_map, toPlaneMapMessage(plane_map));
+    send(channels_.plane_map, toPlaneMapMessage(plane_map));
   }
 
  private:
-  LcmBus& bus_;
+  template <typename Message>
+  void send(const std::string& channel, const Message& message) {
+    send_(channel, encodeMessage(message));
+  }
+
+  Send send_;
   const ChannelConfig& channels_;
+};
+
+/// The daemon's publishers. The pose path (capture, publish step, control loop) publishes on the
+/// bus directly. Mapping and the back end run niced on a live source, so they must never take the
+/// LCM connection's lock: a niced thread that holds it (a full map goes out in many fragments under
+/// it) while starved of CPU kept every pose waiting, up to a second on a fully loaded machine. Each
+/// hands its encoded messages to its own relay lane instead.
+struct DaemonPublishers {
+  DaemonPublishers(LcmBus& bus, const ChannelConfig& channels)
+      : relay(bus),
+        mapping_lane(relay.addLane("mapping", kRelayLaneCapacity)),
+        backend_lane(relay.addLane("backend", kRelayLaneCapacity)),
+        direct([&bus](std::string channel,
+                      std::vector<std::uint8_t> bytes) { bus.publish(channel, bytes); },
+               channels),
+        mapping(
+            [this](std::string channel, std::vector<std::uint8_t> bytes) {
+              mapping_lane.publish(std::move(channel), std::move(bytes));
+            },
+            channels),
+        backend(
+            [this](std::string channel, std::vector<std::uint8_t> bytes) {
+              backend_lane.publish(std::move(channel), std::move(bytes));
+            },
+            channels) {}
+
+  /// A mapping cycle publishes up to three messages (update, full map, planes); a lane this deep
+  /// holds several cycles before its (niced) producer has to wait.
+  static constexpr std::size_t kRelayLaneCapacity = 16;
+  LcmRelay relay;
+  LcmRelay::Lane& mapping_lane;
+  LcmRelay::Lane& backend_lane;
+  LcmDaemonPublisher direct;
+  LcmDaemonPublisher mapping;
+  LcmDaemonPublisher backend;
 };
 
 /// The running daemon's steps and the side queues between them. Optional members are the stages
@@ -236,7 +280,7 @@ struct SlamDaemon::Impl {
   bool openSource();
   /// The LCM bus with the command subscription running; null (logged) when it cannot be made.
   std::unique_ptr<LcmBus> startBus();
-  void buildSteps(LcmBus& bus, DaemonPublisher& publisher);
+  void buildSteps(LcmBus& bus, DaemonPublishers& publishers);
   void wire(Pipeline& pipeline);
   /// Serves commands and the periodic status until the input ends or shutdown is requested;
   /// returns why it stopped.
@@ -532,7 +576,7 @@ std::unique_ptr<LcmBus> SlamDaemon::Impl::startBus() {
   return bus;
 }
 
-void SlamDaemon::Impl::buildSteps(LcmBus& bus, DaemonPublisher& publisher) {
+void SlamDaemon::Impl::buildSteps(LcmBus& bus, DaemonPublishers& publishers) {
   steps = std::make_unique<DaemonSteps>();
   DaemonSteps& s = *steps;
   std::function<void(const RgbdFrame&)> republish;
@@ -566,12 +610,12 @@ void SlamDaemon::Impl::buildSteps(LcmBus& bus, DaemonPublisher& publisher) {
   if (filter_config.enabled && filter_config.planes.enabled) s.planes.emplace(s.plane_segmentation);
   s.filter.emplace(filter_config, vanishing_point_thread ? &s.vanishing_points : nullptr, wait,
                    s.planes ? &s.plane_segmentation : nullptr);
-  s.publish.emplace(publisher, daemon.world_frame, daemon.camera_frame,
+  s.publish.emplace(publishers.direct, daemon.world_frame, daemon.camera_frame,
                     backend ? &s.pose_corrections : nullptr);
   if (session) s.publish->awaitMapFrame();
   if (mapper) {
-    s.mapping.emplace(*mapper, mapping_config, publisher, backend ? &s.map_corrections : nullptr,
-                      &map_requests);
+    s.mapping.emplace(*mapper, mapping_config, publishers.mapping,
+                      backend ? &s.map_corrections : nullptr, &map_requests);
     s.mapping->watchMemoryPressure(&memory_pressure);
     if (session) {
       s.mapping->useLoadedMap(backend_config.mode == BackendMode::kLocalize, session->map_path,
@@ -579,7 +623,7 @@ void SlamDaemon::Impl::buildSteps(LcmBus& bus, DaemonPublisher& publisher) {
     }
   }
   if (backend) {
-    s.backend.emplace(*backend, daemon.world_frame, publisher, &s.pose_corrections,
+    s.backend.emplace(*backend, daemon.world_frame, publishers.backend, &s.pose_corrections,
                       mapper ? &s.map_corrections : nullptr,
                       send_map_keyframes ? &s.map_keyframes : nullptr);
     s.backend->watchMemoryPressure(&memory_pressure);
@@ -674,14 +718,15 @@ int SlamDaemon::Impl::run(ShutdownSignals& signals) {
   if (!openSource()) return kExitSourceError;
   const std::unique_ptr<LcmBus> bus = startBus();
   if (!bus) return kExitFailure;
-  LcmDaemonPublisher publisher(*bus, channels);
-  buildSteps(*bus, publisher);
+  DaemonPublishers publishers(*bus, channels);
+  buildSteps(*bus, publishers);
   Pipeline pipeline(PipelineMode::kThreaded);
   wire(pipeline);
   // A daemon that starts near its memory limit degrades from the first keyframe on.
   updateMemoryPressure();
 
   StatusBuilder status_builder;
+  publishers.relay.start();
   pipeline.start();
   end_to_end_by_minute.start(steadyNowNs(), steps->publish->endToEnd().snapshot());
   const std::string stop_reason = controlLoop(signals, *bus, pipeline, status_builder);
@@ -693,6 +738,15 @@ int SlamDaemon::Impl::run(ShutdownSignals& signals) {
     SLAMD_LOG_WARN(kLog) << "drain deadline passed; " << stop.discarded << " frames discarded";
   }
   source->close();
+  // Mapping and the back end are joined: the relay publishes what they queued, so that a client
+  // that acts on the "stopped" status (saving the map it rebuilt) has every message before it.
+  // Later publishes on their lanes (map requests served below) go out directly.
+  publishers.relay.stop();
+  for (const auto& lane : publishers.relay.lanes()) {
+    SLAMD_LOG_INFO(kLog) << "LCM relay lane " << lane->name() << ": " << lane->relayed()
+                         << " messages published for it; its producer waited for room "
+                         << lane->waited() << " times";
+  }
   end_to_end_by_minute.finish(steadyNowNs(), steps->publish->endToEnd().snapshot());
   publishStatus(*bus, status_builder, pipeline, "stopped: " + stop_reason);
   bus->stopHandling();
