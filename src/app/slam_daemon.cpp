@@ -833,6 +833,7 @@ void SlamDaemon::Impl::summarize(const std::vector<StageStats>& stats,
   summary.end_to_end_p50_ms = latency.p50_ms;
   summary.end_to_end_p95_ms = latency.p95_ms;
   summary.end_to_end_p99_ms = latency.p99_ms;
+  summary.end_to_end_max_ms = latency.max_ms;
   summary.end_to_end_by_minute = end_to_end_by_minute.windows();
   const CorridorModeStats& corridor = steps->filter->corridorMode();
   summary.corridor_mode_switched_on = corridor.switched_on.load();
@@ -878,7 +879,8 @@ void SlamDaemon::Impl::logSummary(const std::vector<StageStats>& stats,
                        << " errors, " << bus.malformedTotal() << " malformed messages; "
                        << summary.duration_s << " s; capture-to-pose latency p50 "
                        << summary.end_to_end_p50_ms << " ms, p95 " << summary.end_to_end_p95_ms
-                       << " ms, p99 " << summary.end_to_end_p99_ms << " ms";
+                       << " ms, p99 " << summary.end_to_end_p99_ms << " ms, worst "
+                       << summary.end_to_end_max_ms << " ms";
   if (summary.end_to_end_by_minute.size() > 1) {
     const auto worst =
         std::max_element(summary.end_to_end_by_minute.begin(), summary.end_to_end_by_minute.end(),
@@ -1043,6 +1045,7 @@ bool SlamDaemon::Impl::writeMetrics(const std::vector<StageStats>& stats) {
   json.key("end_to_end_p50_ms").value(summary.end_to_end_p50_ms);
   json.key("end_to_end_p95_ms").value(summary.end_to_end_p95_ms);
   json.key("end_to_end_p99_ms").value(summary.end_to_end_p99_ms);
+  json.key("end_to_end_max_ms").value(summary.end_to_end_max_ms);
   // Each minute's own frames: a long run's whole-run p99 hides a bad minute.
   json.key("end_to_end_by_minute").beginArray();
   for (const LatencyWindow& minute : summary.end_to_end_by_minute) {

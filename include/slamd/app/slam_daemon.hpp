@@ -116,6 +116,7 @@ struct DaemonSummary {
   double end_to_end_p50_ms = 0.0;
   double end_to_end_p95_ms = 0.0;
   double end_to_end_p99_ms = 0.0;
+  double end_to_end_max_ms = 0.0;  ///< the worst frame's capture-to-pose latency
   // The corridor mode (filter.planes): times it came on, frames filtered with it on, and the
   // plane increments fused, gated (too far from tracking's), measured over another interval, and
   // the fused ones' mean NIS; plane registrations that failed.
