@@ -103,28 +103,23 @@ class LcmDaemonPublisher final : public DaemonPublisher {
 struct DaemonPublishers {
   DaemonPublishers(LcmBus& bus, const ChannelConfig& channels)
       : relay(bus),
-        mapping_lane(relay.addLane("mapping", kRelayLaneCapacity)),
-        backend_lane(relay.addLane("backend", kRelayLaneCapacity)),
         direct([&bus](std::string channel,
                       std::vector<std::uint8_t> bytes) { bus.publish(channel, bytes); },
                channels),
-        mapping(
-            [this](std::string channel, std::vector<std::uint8_t> bytes) {
-              mapping_lane.publish(std::move(channel), std::move(bytes));
-            },
-            channels),
-        backend(
-            [this](std::string channel, std::vector<std::uint8_t> bytes) {
-              backend_lane.publish(std::move(channel), std::move(bytes));
-            },
-            channels) {}
+        mapping(onto(relay.addLane("mapping", kRelayLaneCapacity)), channels),
+        backend(onto(relay.addLane("backend", kRelayLaneCapacity)), channels) {}
+
+  /// Sends into a relay lane (owned by the relay, which outlives the publishers that use it).
+  static LcmDaemonPublisher::Send onto(LcmRelay::Lane& lane) {
+    return [&lane](std::string channel, std::vector<std::uint8_t> bytes) {
+      lane.publish(std::move(channel), std::move(bytes));
+    };
+  }
 
   /// A mapping cycle publishes up to three messages (update, full map, planes); a lane this deep
   /// holds several cycles before its (niced) producer has to wait.
   static constexpr std::size_t kRelayLaneCapacity = 16;
-  LcmRelay relay;
-  LcmRelay::Lane& mapping_lane;
-  LcmRelay::Lane& backend_lane;
+  LcmRelay relay;  // first: the publishers below send into its lanes
   LcmDaemonPublisher direct;
   LcmDaemonPublisher mapping;
   LcmDaemonPublisher backend;

@@ -50,11 +50,6 @@ class LcmRelay {
     /// directly when the relay is not running.
     void publish(std::string channel, std::vector<std::uint8_t> bytes);
 
-    template <typename Message>
-    void publishMessage(std::string channel, const Message& message) {
-      publish(std::move(channel), encodeMessage(message));
-    }
-
     const std::string& name() const { return name_; }
     /// Messages the relay thread has published for this lane.
     std::uint64_t relayed() const { return relayed_.load(std::memory_order_relaxed); }
