@@ -88,10 +88,17 @@ std::shared_ptr<const Vocabulary> roomVocabulary() {
   return vocabulary;
 }
 
-// The ring corridor's keyframes, rendered once for the tests that need them.
+// The ring corridor's keyframes, rendered once for the tests that need them (the tests of this
+// executable run in one process: ONE_PROCESS in CMakeLists.txt).
 const RenderedKeyframes& ringKeyframes() {
   static const RenderedKeyframes world = renderKeyframes("corridor_loop", kKeyframeStep, 1000);
   return world;
+}
+
+// A lap of the room, a keyframe every 5 frames, rendered once as well.
+const RenderedKeyframes& roomLapKeyframes() {
+  static const RenderedKeyframes lap = renderKeyframes("room", 5, 40);
+  return lap;
 }
 
 struct DetectionRun {
@@ -575,7 +582,7 @@ CullingRun runPingPong(const PingPong& run, bool cull,
 }
 
 TEST(Backend, RevisitingTheSamePlaceAddsNoKeyframesWhenRedundantOnesAreCulled) {
-  const RenderedKeyframes lap = renderKeyframes("room", 5, 40);
+  const RenderedKeyframes& lap = roomLapKeyframes();
   const PingPong run = pingPong(lap, 4);
   const CullingRun culled = runPingPong(run, true);
   const CullingRun kept = runPingPong(run, false);
@@ -603,7 +610,7 @@ TEST(Backend, RevisitingTheSamePlaceAddsNoKeyframesWhenRedundantOnesAreCulled) {
 // keyframes so): a place keeps the keyframes that see it from the most views, the graph holds
 // fewer keyframes, and it stays at what lap 2 left for the laps after.
 TEST(Backend, KeptKeyframesCullTheEarlierOnesTheyMakeRedundant) {
-  const RenderedKeyframes lap = renderKeyframes("room", 5, 40);
+  const RenderedKeyframes& lap = roomLapKeyframes();
   const PingPong run = pingPong(lap, 8);
   const CullingRun both = runPingPong(run, true);
   const CullingRun newest_only = runPingPong(run, true, MemoryPressure::kNone, false);
@@ -627,7 +634,7 @@ TEST(Backend, KeptKeyframesCullTheEarlierOnesTheyMakeRedundant) {
 // What tracking gets back from the back end (VisualOdometry::setMapKeyframes): the kept keyframes
 // near one keyframe, culled or not, each at its optimised pose relative to it, nearest first.
 TEST(Backend, KeyframesNearAKeyframeAreTheKeptOnesWithinReachAtTheirOptimisedPoses) {
-  const RenderedKeyframes lap = renderKeyframes("room", 5, 40);
+  const RenderedKeyframes& lap = roomLapKeyframes();
   const PingPong run = pingPong(lap, 2);
   Backend backend(BackendConfig(), roomVocabulary());
   std::int64_t culled_anchor = -1;
@@ -681,7 +688,7 @@ TEST(Backend, KeyframesNearAKeyframeAreTheKeptOnesWithinReachAtTheirOptimisedPos
 // Culling an earlier keyframe keeps the back end whole: keyframes culled into it follow it to
 // its anchor, every culled keyframe keeps a pose, and a snapshot restores.
 TEST(Backend, AfterEarlierKeyframesAreCulledEveryAnchorIsInTheGraphAndASnapshotRestores) {
-  const RenderedKeyframes lap = renderKeyframes("room", 5, 40);
+  const RenderedKeyframes& lap = roomLapKeyframes();
   const PingPong run = pingPong(lap, 6);
   Backend backend(BackendConfig(), roomVocabulary());
   int culled_earlier = 0;
@@ -713,7 +720,7 @@ TEST(Backend, AfterEarlierKeyframesAreCulledEveryAnchorIsInTheGraphAndASnapshotR
 // The same view again: a keyframe whose features are nearly all inliers of one match is culled
 // into that keyframe even where the 3-view rule could not call it redundant.
 TEST(Backend, AKeyframeThatRepeatsAnEarlierViewIsCulledIntoIt) {
-  const RenderedKeyframes lap = renderKeyframes("room", 5, 40);
+  const RenderedKeyframes& lap = roomLapKeyframes();
   BackendConfig config;
   config.cull_min_covering_keyframes = 50;  // the view rule never holds
   config.cull_earlier_keyframes = false;
@@ -733,7 +740,7 @@ TEST(Backend, AKeyframeThatRepeatsAnEarlierViewIsCulledIntoIt) {
 // daemon.memory_limit_mb: near and over the limit the culling rule is relaxed, so fewer
 // keyframes are kept, and what the culled ones held stays in the map.
 TEST(Backend, UnderMemoryPressureFewerKeyframesAreKept) {
-  const RenderedKeyframes lap = renderKeyframes("room", 5, 40);
+  const RenderedKeyframes& lap = roomLapKeyframes();
   const PingPong run = pingPong(lap, 2);
   const CullingRun normal = runPingPong(run, true);
   const CullingRun near = runPingPong(run, true, MemoryPressure::kNear);
