@@ -25,7 +25,7 @@ inline int accuracyRunFrames(int prefix_frames) { return kSanitizedBuild ? prefi
 
 /// Ends a whole-sequence accuracy test after its (prefix) run under a sanitizer, before the
 /// checks that need the whole sequence.
-#define SLAMD_SKIP_ACCURACY_CHECKS_UNDER_SANITIZER()                                             \
-  if (::slamd::test::kSanitizedBuild)                                                            \
-  GTEST_SKIP() << "sanitizer build: ran a prefix of the sequence for the sanitizer's checks; "   \
+#define SLAMD_SKIP_ACCURACY_CHECKS_UNDER_SANITIZER()                                           \
+  if (::slamd::test::kSanitizedBuild)                                                          \
+  GTEST_SKIP() << "sanitizer build: ran a prefix of the sequence for the sanitizer's checks; " \
                   "accuracy over the whole sequence is checked by the release build's unit stage"
