@@ -43,12 +43,12 @@ class DaemonWithBackEnd : public DaemonInProcess {
  protected:
   /// runRoomLap, once per process for each setting: the tests of this executable run in one
   /// process (ONE_PROCESS in CMakeLists.txt) and share the laps they run alike.
-  const RunResult& roomLap(bool backend_enabled, const std::string& tag,
-                           const std::vector<std::string>& assignments = {}) {
+  const RunResult& roomLap(bool backend_enabled, const std::vector<std::string>& assignments = {}) {
     static std::map<std::pair<bool, std::vector<std::string>>, RunResult> laps;
     const auto key = std::make_pair(backend_enabled, assignments);
     auto found = laps.find(key);
     if (found == laps.end()) {
+      const std::string tag = "lap" + std::to_string(laps.size());  // its trajectory file's name
       found = laps.emplace(key, runRoomLap(backend_enabled, tag, assignments)).first;
     }
     return found->second;
@@ -81,8 +81,8 @@ class DaemonWithBackEnd : public DaemonInProcess {
 };
 
 TEST_F(DaemonWithBackEnd, ClosingTheLoopOfARoomLapReducesTrajectoryError) {
-  const RunResult& odometry = roomLap(false, "odometry");
-  const RunResult& slam = roomLap(true, "slam");
+  const RunResult& odometry = roomLap(false);
+  const RunResult& slam = roomLap(true);
   EXPECT_EQ(slam.summary.poses_published, odometry.summary.poses_published);
   EXPECT_EQ(slam.summary.errors, 0u);
   EXPECT_GE(slam.summary.loops, 1) << "the return to the start of the lap was not recognised";
@@ -109,7 +109,7 @@ TEST_F(DaemonWithBackEnd, AfterTheLensIsCoveredTrackingResumesInTheSameMap) {
   // segment starts, and the back end must put it back into the map by recognising a place.
   const std::vector<std::string> blackout = {"synthetic.blackout_start_s=6",
                                              "synthetic.blackout_duration_s=1"};
-  const RunResult& slam = roomLap(true, "relocalised", blackout);
+  const RunResult& slam = roomLap(true, blackout);
   EXPECT_GE(slam.summary.relocalizations, 1) << "the new tracking segment was never relocalised";
   // The camera moves about 0.8 m during the blackout: a segment left where tracking lost it
   // would be off by that much. Measured when written: 0.011 m.
@@ -129,10 +129,10 @@ TEST_F(DaemonWithBackEnd, AfterTheLensIsCoveredTrackingResumesInTheSameMap) {
 // It keeps fewer keyframes, keeps new ones without their alignment images, makes the map far
 // from the camera coarser, says so, and still tracks every frame.
 TEST_F(DaemonWithBackEnd, AMemoryLimitBelowWhatTheRunNeedsMakesItKeepFewerKeyframes) {
-  const RunResult& normal = roomLap(true, "slam");
+  const RunResult& normal = roomLap(true);
   // A far map begins 1 m from the camera, so that the room has one.
   const RunResult& limited =
-      roomLap(true, "limited", {"daemon.memory_limit_mb=1", "mapping.coarse_far_radius_m=1"});
+      roomLap(true, {"daemon.memory_limit_mb=1", "mapping.coarse_far_radius_m=1"});
   std::printf(
       "room lap: %lld keyframes of %lld bytes each without a limit, %lld of %lld bytes under a "
       "1 MB limit; ATE %.4f m / %.4f m; %lld map blocks merged far from the camera\n",
